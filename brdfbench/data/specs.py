@@ -1,0 +1,19 @@
+"""Entry-point specs of the built-in datasets."""
+
+from ..specs import DatasetSpec
+
+SYNTHETIC = DatasetSpec(
+    name="synthetic",
+    description="Embedded default: deterministic measured-like materials written as MERL .binary files to a cache",
+    target="brdfbench.data.synthetic:synthetic_dataset",
+)
+MERL_FOLDER = DatasetSpec(
+    name="merl_folder",
+    description="Every MERL .binary file in a user-given folder",
+    target="brdfbench.data.merl_folder:merl_folder_dataset",
+)
+NBRDF_RELEASE = DatasetSpec(
+    name="nbrdf_release",
+    description="Published NBRDF networks of real measured materials (Sztrajman et al. 2021) on the MERL grid",
+    target="brdfbench.data.nbrdf_release:nbrdf_release_dataset",
+)

@@ -1,0 +1,229 @@
+"""MERL `.binary` tables: reading, writing, validation and lookup.
+
+Follows the reference reader (Matusik et al., BRDFRead.cpp) exactly: a header of three
+int32 dims (90, 90, 180), then float64 values channel-major (all R, then G, then B), each
+channel scaled by 1/1500, 1.15/1500, 1.66/1500; θh indexed by square-root warping; φd
+folded by reciprocity into [0, π). Negative cells mark invalid measurements.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from . import coords
+from .errors import DataError
+
+RES_THETA_H = 90
+RES_THETA_D = 90
+RES_PHI_D = 180  # the reference's BRDF_SAMPLING_RES_PHI_D / 2
+SHAPE = (RES_THETA_H, RES_THETA_D, RES_PHI_D)
+N_CELLS = RES_THETA_H * RES_THETA_D * RES_PHI_D
+CHANNEL_SCALES = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
+HEADER_BYTES = 12
+FILE_BYTES = HEADER_BYTES + 3 * N_CELLS * 8
+INVALID_RAW = -1.0
+_SCALES = np.asarray(CHANNEL_SCALES).reshape(3, 1, 1, 1)
+
+
+@dataclass(frozen=True)
+class MerlTable:
+    """A MERL table as stored: `raw` (3, 90, 90, 180) float64 file values; < 0 = invalid.
+
+    `values` are in BRDF units (1/sr): raw times the channel scales, negatives included,
+    as the reference reader computes them.
+    """
+
+    raw: np.ndarray
+
+    def __post_init__(self):
+        if self.raw.shape != (3, *SHAPE):
+            raise ValueError(f"MERL table must have shape (3, 90, 90, 180), got {self.raw.shape}")
+
+    @classmethod
+    def from_values(cls, values: np.ndarray, valid: np.ndarray | None = None) -> "MerlTable":
+        """Table from BRDF values (3, 90, 90, 180); cells outside `valid` become INVALID_RAW."""
+        raw = np.asarray(values, dtype=np.float64) / _SCALES
+        if valid is not None:
+            raw = np.where(valid[None], raw, INVALID_RAW)
+        return cls(raw)
+
+    @cached_property
+    def values(self) -> np.ndarray:
+        return self.raw * _SCALES
+
+    @cached_property
+    def valid(self) -> np.ndarray:
+        """(90, 90, 180) mask of cells valid in all three channels."""
+        return np.all(self.raw >= 0, axis=0)
+
+    def lookup(self, wi: torch.Tensor, wo: torch.Tensor, mode: str = "nearest") -> torch.Tensor:
+        """Raw table values (N, 3) at direction pairs, negatives included, as the reference returns them."""
+        if mode == "nearest":
+            return lookup_nearest(self.values, wi, wo)
+        if mode == "trilinear":
+            return lookup_trilinear(self.values, wi, wo)
+        raise ValueError(f"unknown MERL lookup mode {mode!r}; expected 'nearest' or 'trilinear'")
+
+
+# --------------------------------------------------------------------------- file I/O
+
+
+def _fail(path, fault: str) -> DataError:
+    return DataError(f"{path}: {fault}")
+
+
+def read_binary(path: str | os.PathLike) -> MerlTable:
+    """Read and validate a MERL `.binary` file."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except IsADirectoryError:
+        raise _fail(path, "is a directory, not a MERL .binary file") from None
+    except OSError as exc:
+        raise _fail(path, f"cannot read MERL file ({exc.strerror})") from None
+    if len(raw) < HEADER_BYTES:
+        raise _fail(path, f"truncated MERL file: {len(raw)} bytes, shorter than the 12-byte header")
+    dims = tuple(int(d) for d in np.frombuffer(raw[:HEADER_BYTES], dtype="<i4"))
+    if dims != SHAPE:
+        raise _fail(path, f"wrong MERL header dims {dims}, expected {SHAPE}")
+    if len(raw) < FILE_BYTES:
+        raise _fail(path, f"truncated MERL file: {len(raw)} bytes, expected {FILE_BYTES}")
+    if len(raw) > FILE_BYTES:
+        raise _fail(path, f"oversized MERL file: {len(raw)} bytes, expected {FILE_BYTES}")
+    data = np.frombuffer(raw, dtype="<f8", offset=HEADER_BYTES).reshape(3, *SHAPE)
+    bad = ~np.isfinite(data)
+    if bad.any():
+        c, i, j, k = np.argwhere(bad)[0]
+        raise _fail(path, f"{int(bad.sum())} non-finite (NaN/Inf) cells, first at channel {c}, index ({i}, {j}, {k})")
+    return MerlTable(data.copy())
+
+
+def write_binary(path: str | os.PathLike, table: MerlTable) -> None:
+    """Write a MERL `.binary` file atomically (temporary file, then rename)."""
+    path = Path(path)
+    raw = np.asarray(table.raw, dtype="<f8")
+    if not np.all(np.isfinite(raw)):
+        raise ValueError(f"refusing to write {path}: the table has non-finite cells")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(np.asarray(SHAPE, dtype="<i4").tobytes())
+            f.write(raw.tobytes())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+# --------------------------------------------------------------------------- indexing
+
+
+def theta_half_index(theta_h: torch.Tensor) -> torch.Tensor:
+    """Reference θh index: int(sqrt(θh / (π/2) · 90 · 90)), 0 for θh <= 0, clamped to [0, 89]."""
+    t = theta_h.double()
+    warped = torch.sqrt(torch.clamp(t / (math.pi / 2.0) * RES_THETA_H * RES_THETA_H, min=0.0))
+    idx = torch.clamp(warped.long(), 0, RES_THETA_H - 1)
+    return torch.where(t <= 0, torch.zeros_like(idx), idx)
+
+
+def theta_diff_index(theta_d: torch.Tensor) -> torch.Tensor:
+    """Reference θd index: int(θd / (π/2) · 90), clamped to [0, 89]."""
+    return torch.clamp((theta_d.double() / (math.pi * 0.5) * RES_THETA_D).long(), 0, RES_THETA_D - 1)
+
+
+def fold_phi_diff(phi_d: torch.Tensor) -> torch.Tensor:
+    """φd in [0, 2π) folded by reciprocity (φd ~ φd + π) into [0, π)."""
+    p = phi_d.double()
+    return torch.where(p >= math.pi, p - math.pi, p)
+
+
+def phi_diff_index(phi_d: torch.Tensor) -> torch.Tensor:
+    """Reference φd index: int(φd / π · 360 / 2) after folding, clamped to [0, 179]."""
+    p = fold_phi_diff(phi_d)
+    return torch.clamp((p / math.pi * (2 * RES_PHI_D) / 2).long(), 0, RES_PHI_D - 1)
+
+
+def cell_indices(wi: torch.Tensor, wo: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    hd = coords.to_half_diff(wi.double(), wo.double())
+    return theta_half_index(hd.theta_h), theta_diff_index(hd.theta_d), phi_diff_index(hd.phi_d)
+
+
+def lookup_nearest(values: np.ndarray, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+    """Nearest-cell values (N, 3), float64, exactly as the reference reader returns them."""
+    ih, id_, ip = cell_indices(wi, wo)
+    flat = (ih * RES_THETA_D + id_) * RES_PHI_D + ip
+    table = torch.from_numpy(np.ascontiguousarray(values)).reshape(3, N_CELLS)
+    return table[:, flat].T
+
+
+def continuous_indices(theta_h, theta_d, phi_d):
+    """Fractional cell coordinates whose integer parts are the reference indices; cell centres sit at i + 0.5."""
+    th = torch.sqrt(torch.clamp(theta_h.double() / (math.pi / 2.0), min=0.0)) * RES_THETA_H
+    td = theta_d.double() / (math.pi / 2.0) * RES_THETA_D
+    pd = fold_phi_diff(phi_d) / math.pi * RES_PHI_D
+    return th, td, pd
+
+
+def lookup_trilinear(values: np.ndarray, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+    """Trilinear interpolation between cell centres; φd wraps (period π); invalid cells get zero weight."""
+    hd = coords.to_half_diff(wi.double(), wo.double())
+    th, td, pd = continuous_indices(hd.theta_h, hd.theta_d, hd.phi_d)
+    table = torch.from_numpy(np.ascontiguousarray(values)).reshape(3, N_CELLS)
+    valid = (table >= 0).all(dim=0).double()  # scales are positive: same sign as raw
+
+    def corners(x, n, wrap):
+        x = x - 0.5
+        lo = torch.floor(x)
+        frac = x - lo
+        lo = lo.long()
+        hi = lo + 1
+        if wrap:
+            lo, hi = lo % n, hi % n
+        else:
+            frac = torch.where(lo < 0, torch.zeros_like(frac), frac)
+            frac = torch.where(hi > n - 1, torch.zeros_like(frac), frac)
+            lo, hi = lo.clamp(0, n - 1), hi.clamp(0, n - 1)
+        return (lo, 1 - frac), (hi, frac)
+
+    acc = torch.zeros(wi.shape[0], 3, dtype=torch.float64)
+    wsum = torch.zeros(wi.shape[0], dtype=torch.float64)
+    for ih, wh in corners(th, RES_THETA_H, False):
+        for id_, wd in corners(td, RES_THETA_D, False):
+            for ip, wp in corners(pd, RES_PHI_D, True):
+                flat = (ih * RES_THETA_D + id_) * RES_PHI_D + ip
+                w = wh * wd * wp * valid[flat]
+                acc += w[:, None] * table[:, flat].T
+                wsum += w
+    out = acc / torch.where(wsum > 0, wsum, torch.ones_like(wsum))[:, None]
+    return torch.where((wsum > 0)[:, None], out, torch.full_like(out, -1.0))
+
+
+# --------------------------------------------------------------------------- the grid
+
+
+def grid_angles(dtype=torch.float64) -> coords.HalfDiff:
+    """Rusinkiewicz angles (φh = 0) of the 90×90×180 cell centres, each flattened (N_CELLS,).
+
+    Centres sit half a cell into each bin of the reference indexing, so `lookup_nearest`
+    at a centre returns that very cell.
+    """
+    i = (torch.arange(RES_THETA_H, dtype=torch.float64) + 0.5) / RES_THETA_H
+    theta_h = i * i * (math.pi / 2)
+    theta_d = (torch.arange(RES_THETA_D, dtype=torch.float64) + 0.5) / RES_THETA_D * (math.pi / 2)
+    phi_d = (torch.arange(RES_PHI_D, dtype=torch.float64) + 0.5) / RES_PHI_D * math.pi
+    th, td, pd = torch.meshgrid(theta_h, theta_d, phi_d, indexing="ij")
+    zeros = torch.zeros(N_CELLS, dtype=torch.float64)
+    return coords.HalfDiff(th.reshape(-1).to(dtype), zeros.to(dtype), td.reshape(-1).to(dtype), pd.reshape(-1).to(dtype))
+
+
+def grid_directions(dtype=torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
+    """Direction pairs (N_CELLS, 3) at the cell centres, in table order."""
+    g = grid_angles(torch.float64)
+    wi, wo = coords.from_half_diff(g.theta_h, g.phi_h, g.theta_d, g.phi_d)
+    return wi.to(dtype), wo.to(dtype)

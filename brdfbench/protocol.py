@@ -1,0 +1,93 @@
+"""The BRDF representation protocol every representation plugin implements.
+
+A representation evaluates RGB BRDF values (N, 3), not cosine-weighted, in MERL units
+(1/sr), on unit direction pairs (N, 3) in the local shading frame (z = normal). Pairs
+with either direction at or below the horizon evaluate to 0. The output dtype follows
+the input dtype (fp32 or fp64).
+
+State for saving is a flat dict of tensors plus a JSON-able dict of metadata, so that
+`brdfbench.modelio` can store it as safetensors and loading never runs code.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import torch
+
+from .coords import above_horizon
+from .merl import MerlTable
+
+
+@dataclass(frozen=True)
+class Material:
+    """A measured target material: a MERL-format table plus its identity."""
+
+    name: str
+    table: MerlTable
+    category: str = "unknown"
+    source: str = ""
+
+
+class Representation(ABC):
+    """Base class for BRDF representations.
+
+    Subclasses implement `_eval` (directions already known to be above the horizon),
+    `fit`, `state_dict`/`from_state`, and `nbytes`. `params` are the constructor keyword
+    arguments, recorded with saved models and results.
+    """
+
+    #: Capability tags the conformance kit reads (see brdfbench.testing).
+    tags: ClassVar[frozenset[str]] = frozenset()
+
+    def __init__(self, **params: Any):
+        self.params = dict(params)
+
+    # -- evaluation --------------------------------------------------------------
+    def eval(self, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+        """BRDF values (N, 3) at direction pairs; 0 where either direction is below the horizon."""
+        if wi.ndim != 2 or wi.shape[-1] != 3 or wi.shape != wo.shape:
+            raise ValueError(f"eval expects two (N, 3) tensors, got {tuple(wi.shape)} and {tuple(wo.shape)}")
+        if wi.dtype != wo.dtype or not wi.dtype.is_floating_point:
+            raise ValueError(f"eval expects matching floating dtypes, got {wi.dtype} and {wo.dtype}")
+        mask = above_horizon(wi, wo)
+        out = torch.zeros(wi.shape[0], 3, dtype=wi.dtype)
+        if mask.any():
+            out[mask] = self._eval(wi[mask], wo[mask]).to(wi.dtype)
+        return out
+
+    @abstractmethod
+    def _eval(self, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
+        """Values at pairs that are both above the horizon."""
+
+    # -- fitting -----------------------------------------------------------------
+    @abstractmethod
+    def fit(self, target: Material, *, seed: int = 0) -> "Representation":
+        """Fit to a measured material; returns self."""
+
+    # -- persistence -------------------------------------------------------------
+    @abstractmethod
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        """Every tensor needed to rebuild the fitted model."""
+
+    def metadata(self) -> dict[str, Any]:
+        """JSON-able extras saved beside the tensors (params are saved separately)."""
+        return {}
+
+    @classmethod
+    @abstractmethod
+    def from_state(cls, params: dict[str, Any], tensors: dict[str, torch.Tensor], metadata: dict[str, Any]) -> "Representation":
+        """Rebuild a fitted model from `state_dict()` and `metadata()`."""
+
+    # -- cost --------------------------------------------------------------------
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the fitted model's parameters."""
+        return sum(t.numel() * t.element_size() for t in self.state_dict().values())
+
+    @property
+    def flops_per_eval(self) -> int | None:
+        """Floating-point operations per (ωi, ωo) evaluation, where known."""
+        return None

@@ -1,0 +1,74 @@
+"""Typed plugin specifications: the objects entry points resolve to.
+
+A spec is light: it names its implementation by a dotted path ("module:attr") that is
+imported only on `load()`, so listing plugins imports no heavy code. A spec carries what
+a registry or a report needs without loading the plugin: name, one-line description,
+capability tags, and the conformance checks it expects to fail (with reasons).
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from .errors import PluginError
+
+
+def import_target(target: str) -> Any:
+    """Import "package.module:attr" and return the attribute."""
+    module_name, _, attr = target.partition(":")
+    if not module_name or not attr:
+        raise PluginError(f"plugin target {target!r} must look like 'package.module:attribute'")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise PluginError(f"cannot import plugin module {module_name!r} for {target!r}: {exc}") from exc
+    try:
+        return getattr(module, attr)
+    except AttributeError:
+        raise PluginError(f"plugin module {module_name!r} has no attribute {attr!r}") from None
+
+
+@dataclass(frozen=True)
+class PluginSpec:
+    name: str
+    description: str
+    target: str
+    tags: frozenset[str] = frozenset()
+    #: check name -> reason; the conformance kit reports these as expected failures.
+    xfail_checks: Mapping[str, str] = field(default_factory=dict)
+
+    def load(self) -> Any:
+        return import_target(self.target)
+
+
+@dataclass(frozen=True)
+class RepresentationSpec(PluginSpec):
+    """A BRDF representation; `target` is a `brdfbench.protocol.Representation` subclass."""
+
+    def create(self, **params: Any):
+        return self.load()(**params)
+
+
+@dataclass(frozen=True)
+class GeneratorSpec(PluginSpec):
+    """A material generator (PCA, VAE, hyperdiffusion, ...)."""
+
+
+@dataclass(frozen=True)
+class DatasetSpec(PluginSpec):
+    """A source of target materials; `target` is a callable returning a `brdfbench.data.Dataset`."""
+
+
+@dataclass(frozen=True)
+class MetricSpec(PluginSpec):
+    """A metric; `target` is a `brdfbench_metrics.base.Metric` subclass."""
+
+    unit: str = ""
+    higher_is_better: bool = False
+
+
+@dataclass(frozen=True)
+class SceneSpec(PluginSpec):
+    """A scene: what it contains decides which simulator evaluates it."""
