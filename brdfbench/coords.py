@@ -18,10 +18,6 @@ import torch
 
 Tensor = torch.Tensor
 
-#: |ωi + ωo| below this (relative to the dtype's eps) counts as opposite directions.
-_DEGENERATE_SCALE = 64.0
-
-
 class HalfDiff(NamedTuple):
     theta_h: Tensor
     phi_h: Tensor
@@ -60,13 +56,37 @@ def _rotate_y(v: Tensor, cos_a: Tensor, sin_a: Tensor) -> Tensor:
 
 
 def half_vector(wi: Tensor, wo: Tensor) -> Tensor:
-    """Normalised ωi + ωo; the normal where the two directions are (nearly) opposite."""
+    """Unit half vector of (ωi, ωo): ωi + ωo normalised.
+
+    Floating-point addition is accurate relative to its result, so ωi + ωo keeps its
+    direction however small it gets; it is rescaled before normalising so that tiny sums
+    do not underflow. For nearly opposite pairs (θd > π/4) the component of ωi + ωo along
+    ωi − ωo is removed: it is zero for exact unit vectors, but the O(eps) norm mismatch of
+    rounded inputs would otherwise tilt h by O(eps / |ωi + ωo|) and break the mirror
+    symmetry ωo = 2(ωi·h)h − ωi. Only when ωi + ωo is exactly zero is h undefined; the
+    unit vector ⊥ ωi nearest the normal is used then (the normal when ωi is horizontal,
+    +x when ωi is ±z), so θd = π/2 and the pair still round-trips.
+    """
     s = wi + wo
-    norm = torch.linalg.vector_norm(s, dim=-1, keepdim=True)
-    tiny = _DEGENERATE_SCALE * torch.finfo(s.dtype).eps
-    normal = torch.zeros_like(s)
-    normal[..., 2] = 1.0
-    return torch.where(norm > tiny, s / torch.where(norm > tiny, norm, torch.ones_like(norm)), normal)
+    diff = wi - wo
+    s2 = (s * s).sum(-1, keepdim=True)
+    d2 = (diff * diff).sum(-1, keepdim=True)
+    opposite = d2 > s2
+    proj = (s * diff).sum(-1, keepdim=True) / torch.where(opposite, d2, torch.ones_like(d2))
+    s = torch.where(opposite, s - proj * diff, s)
+    scale = s.abs().amax(dim=-1, keepdim=True)
+    ok = scale > 0
+    h = normalize(s / torch.where(ok, scale, torch.ones_like(scale)))
+    # Fallback for ωo = −ωi exactly: z − (z·ωi) ωi, or +x when that vanishes.
+    z = torch.zeros_like(wi)
+    z[..., 2] = 1.0
+    t = z - wi[..., 2:3] * wi
+    t_scale = t.abs().amax(dim=-1, keepdim=True)
+    t_ok = t_scale > 64.0 * torch.finfo(wi.dtype).eps
+    x = torch.zeros_like(wi)
+    x[..., 0] = 1.0
+    fallback = torch.where(t_ok, normalize(t / torch.where(t_ok, t_scale, torch.ones_like(t_scale))), x)
+    return torch.where(ok, h, fallback)
 
 
 def to_half_diff(wi: Tensor, wo: Tensor) -> HalfDiff:
@@ -83,8 +103,11 @@ def to_half_diff(wi: Tensor, wo: Tensor) -> HalfDiff:
     d = _rotate_z(wi, cos_p, -sin_p)
     d = _rotate_y(d, h[..., 2], -rho)
     theta_d, phi_d = vector_to_spherical(d)
-    phi_d = torch.remainder(phi_d, 2 * math.pi)
-    phi_d = torch.where(phi_d >= 2 * math.pi, phi_d - 2 * math.pi, phi_d)  # remainder may round up
+    # atan2 gives [-π, π]; negatives move up by 2π. A tiny negative one rounds up to 2π:
+    # keep it just below 2π (not 0), where it belongs, so [0, 2π) holds and the order is kept.
+    two_pi = torch.tensor(2 * math.pi, dtype=phi_d.dtype, device=phi_d.device)
+    phi_d = torch.where(phi_d < 0, phi_d + two_pi, phi_d)
+    phi_d = torch.where(phi_d >= two_pi, torch.nextafter(two_pi, torch.zeros_like(two_pi)), phi_d)
     return HalfDiff(theta_h, phi_h, theta_d, phi_d)
 
 

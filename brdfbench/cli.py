@@ -1,0 +1,91 @@
+"""The `brdfbench` command.
+
+`brdfbench [hydra overrides]` runs the benchmark from the packaged Hydra configs (the
+default sweeps the built-in representations over the embedded dataset and writes the
+leaderboard). Subcommands that need no config:
+
+    brdfbench list                      one line per registered plugin
+    brdfbench report [--results DIR]    regenerate the leaderboard from the results store
+    brdfbench check NAME                run the conformance kit on a representation
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from .errors import BrdfbenchError
+
+SUBCOMMANDS = ("list", "report", "check")
+EXIT_ERROR = 2
+
+
+def _fail(message: str) -> int:
+    print(f"brdfbench: error: {message}", file=sys.stderr)
+    return EXIT_ERROR
+
+
+def cmd_list(args) -> int:
+    from . import registry
+
+    group = args.group
+    if group and group not in registry.GROUPS and f"{group}s" in registry.GROUPS:
+        group = f"{group}s"  # accept the singular, as in the config groups
+    groups = [group] if group else list(registry.GROUPS)
+    for group in groups:
+        for name in registry.names(group):
+            spec = registry.get(group, name)
+            print(f"{group:16s} {name:16s} {spec.description}")
+    return 0
+
+
+def cmd_report(args) -> int:
+    from .report import write_reports
+
+    for path in write_reports(Path(args.results)):
+        print(path)
+    return 0
+
+
+def cmd_check(args) -> int:
+    from .testing import check_representation
+
+    report = check_representation(args.name, n_pairs=args.pairs)
+    print(report.summary())
+    return 0 if report.passed else 1
+
+
+def _subcommand_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="brdfbench", description="BRDF benchmark utilities")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("list", help="list registered plugins")
+    p.add_argument("group", nargs="?", help="only this group (representations, generators, metrics, datasets, scenes)")
+    p.set_defaults(func=cmd_list)
+    p = sub.add_parser("report", help="regenerate the leaderboard from a results store")
+    p.add_argument("--results", default="results", help="results folder holding brdfbench.sqlite (default: results)")
+    p.set_defaults(func=cmd_report)
+    p = sub.add_parser("check", help="run the conformance kit on a registered representation")
+    p.add_argument("name")
+    p.add_argument("--pairs", type=int, default=10**6, help="adversarial direction pairs per dtype (default 1e6)")
+    p.set_defaults(func=cmd_check)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    if argv and argv[0] in SUBCOMMANDS:
+        args = _subcommand_parser().parse_args(argv)
+        try:
+            return args.func(args)
+        except BrdfbenchError as exc:
+            return _fail(str(exc))
+    from .hydra_app import run_hydra
+
+    return run_hydra(argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,38 @@
+"""What a representation costs: evaluation throughput and model size.
+
+Throughput is the median over repeated timed batches after one warm-up batch, measured
+on this machine's CPU with torch's current thread count.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+import torch
+
+from ..protocol import Representation
+from . import Measurement, directions
+
+
+def evaluation_throughput(
+    model: Representation, *, batch: int = 2**16, min_time_s: float = 0.3, max_repeats: int = 20,
+    seed: int = 0, dtype: torch.dtype = torch.float32,
+) -> Measurement:
+    wi, wo = (t.to(dtype) for t in directions.random_pairs(batch, seed + 1, torch.float64))
+    model.eval(wi, wo)  # warm-up
+    times: list[float] = []
+    start = time.perf_counter()
+    while len(times) < max_repeats and (len(times) < 3 or time.perf_counter() - start < min_time_s):
+        t0 = time.perf_counter()
+        model.eval(wi, wo)
+        times.append(time.perf_counter() - t0)
+    return Measurement("evals_per_s", batch / statistics.median(times), "evals/s", True)
+
+
+def model_size(model: Representation) -> list[Measurement]:
+    out = [Measurement("model_bytes", float(model.nbytes), "B", False)]
+    flops = model.flops_per_eval
+    if flops is not None:
+        out.append(Measurement("flops_per_eval", float(flops), "FLOP", False))
+    return out

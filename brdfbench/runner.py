@@ -1,0 +1,142 @@
+"""One benchmark job: fit one representation to every material of a dataset, measure, store.
+
+A plugin that raises or exceeds the time limit becomes a recorded failure row and the
+sweep goes on; bad data (a malformed MERL file) stops the job with an error naming it.
+Cells already in the store are skipped, so an interrupted run resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import inspect
+import logging
+import time
+import traceback
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from tqdm.auto import tqdm
+
+from . import __version__, modelio, registry
+from .errors import BrdfbenchError, ConfigError
+from .harness import Measurement
+from .harness.accuracy import evaluate_accuracy
+from .harness.cost import evaluation_throughput, model_size
+from .provenance import config_hash, git_sha
+from .store import ResultsStore, Row, now
+from .timeouts import time_limit
+
+log = logging.getLogger(__name__)
+
+DTYPES = {"float32": torch.float32, "float64": torch.float64}
+
+
+@dataclass(frozen=True)
+class HarnessConfig:
+    metrics: tuple[str, ...] = ("l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae")
+    n_random: int = 2**20
+    dtype: str = "float32"
+    throughput_batch: int = 2**16
+    timeout_s: float | None = 600.0
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    representation: str
+    representation_params: dict[str, Any]
+    label: str
+    dataset: str
+    dataset_params: dict[str, Any]
+    harness: HarnessConfig = field(default_factory=HarnessConfig)
+    scene: str = "brdf_space"
+    materials: tuple[str, ...] | None = None
+    limit: int | None = None
+    seed: int = 0
+    results_dir: Path = Path("results")
+    save_models: bool = False
+
+    @property
+    def store_path(self) -> Path:
+        return self.results_dir / "brdfbench.sqlite"
+
+
+def _check_params(cls, params: dict[str, Any], where: str) -> None:
+    """Reject parameters the plugin's constructor does not take, naming the key."""
+    sig = inspect.signature(cls)
+    if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+        return
+    for key in params:
+        if key not in sig.parameters:
+            allowed = ", ".join(sig.parameters) or "none"
+            raise ConfigError(f"unknown key {where}.{key}; {where} takes: {allowed}")
+
+
+def run(cfg: RunConfig) -> dict[str, int]:
+    """Run one job; returns counts of cells done, skipped and failed."""
+    rep_spec = registry.get("representations", cfg.representation)
+    rep_cls = rep_spec.load()
+    _check_params(rep_cls, cfg.representation_params, "representation.params")
+    scene = registry.get("scenes", cfg.scene).load()()
+    if scene.needs_rendering:
+        raise ConfigError(f"scene {cfg.scene!r} needs rendering, which this harness does not do; use scene=brdf_space")
+    metric_specs = [registry.get("metrics", m) for m in cfg.harness.metrics]
+    if cfg.harness.dtype not in DTYPES:
+        raise ConfigError(f"harness.dtype {cfg.harness.dtype!r} must be one of {', '.join(DTYPES)}")
+    dtype = DTYPES[cfg.harness.dtype]
+
+    ds_factory = registry.get("datasets", cfg.dataset).load()
+    _check_params(ds_factory, cfg.dataset_params, "dataset.params")
+    dataset = ds_factory(**cfg.dataset_params).subset(list(cfg.materials) if cfg.materials else None, cfg.limit)
+
+    store = ResultsStore(cfg.store_path)
+    chash = config_hash({
+        "representation": cfg.representation, "params": cfg.representation_params,
+        "harness": cfg.harness.__dict__, "seed": cfg.seed,
+    })
+    run_id = uuid.uuid4().hex[:12]
+    counts = {"done": 0, "skipped": 0, "failed": 0}
+
+    def row(material: str, category: str, m: Measurement | None, status="ok", message="") -> Row:
+        return Row(
+            run_id=run_id, representation=cfg.label, dataset=cfg.dataset, dataset_fingerprint=dataset.fingerprint,
+            material=material, category=category, metric=m.metric if m else "error",
+            value=m.value if m else None, unit=m.unit if m else "", higher_is_better=m.higher_is_better if m else False,
+            status=status, message=message, seed=cfg.seed, config_hash=chash, package_version=__version__,
+            git_sha=git_sha(), timestamp=now(),
+        )
+
+    bar = tqdm(dataset.materials, desc=f"{cfg.label} on {cfg.dataset}", unit="material", dynamic_ncols=True)
+    for name in bar:
+        if store.has_cell(cfg.label, chash, dataset.fingerprint, name):
+            counts["skipped"] += 1
+            continue
+        material = dataset.load(name)  # bad data raises DataError: stop, naming the file
+        try:
+            with time_limit(cfg.harness.timeout_s, f"{cfg.label} on {name}"):
+                torch.manual_seed(cfg.seed)
+                model = rep_spec.create(**cfg.representation_params)
+                t0 = time.perf_counter()
+                model.fit(material, seed=cfg.seed)
+                fit_s = time.perf_counter() - t0
+                measurements = evaluate_accuracy(
+                    model, material, metric_specs, n_random=cfg.harness.n_random, seed=cfg.seed, dtype=dtype,
+                )
+                measurements.append(Measurement("fit_time", fit_s, "s", False))
+                measurements.append(evaluation_throughput(model, batch=cfg.harness.throughput_batch, seed=cfg.seed, dtype=dtype))
+                measurements.extend(model_size(model))
+                if cfg.save_models:
+                    modelio.save(model, cfg.representation, cfg.results_dir / "models" / dataset.fingerprint / cfg.label / f"{name}.safetensors")
+        except BrdfbenchError:
+            raise
+        except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
+            log.warning("%s failed on %s: %s", cfg.label, name, exc)
+            message = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+            store.write_cell([row(name, material.category, None, "failed", message)])
+            counts["failed"] += 1
+            continue
+        store.write_cell([row(name, material.category, m) for m in measurements])
+        counts["done"] += 1
+        bar.set_postfix(fit_s=f"{fit_s:.2f}")
+    return counts

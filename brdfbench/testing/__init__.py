@@ -1,0 +1,30 @@
+"""The public conformance kit, in the style of scikit-learn's `check_estimator`.
+
+One line certifies a representation plugin, registered or not:
+
+    from brdfbench.testing import check_representation
+    check_representation("my_brdf").raise_on_failure()
+
+In pytest, one test per check:
+
+    from brdfbench.testing import representation_checks
+    @pytest.mark.parametrize("check", representation_checks("my_brdf"), ids=str)
+    def test_conformance(check): check()
+
+Capability tags on the spec select the checks (`fittable`, `reciprocal`, `isotropic`);
+a spec's `xfail_checks` maps a check name to the reason it is expected to fail.
+"""
+
+from __future__ import annotations
+
+from .adversarial import FAMILIES, adversarial_pairs
+from .kit import Check, ConformanceReport, check_representation, representation_checks
+
+__all__ = [
+    "FAMILIES",
+    "Check",
+    "ConformanceReport",
+    "adversarial_pairs",
+    "check_representation",
+    "representation_checks",
+]

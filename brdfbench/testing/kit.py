@@ -1,0 +1,251 @@
+"""Conformance checks for representation plugins and the machinery that runs them."""
+
+from __future__ import annotations
+
+import tempfile
+import traceback
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Callable
+
+import torch
+
+from .. import modelio, registry
+from ..protocol import Material, Representation
+from ..specs import RepresentationSpec
+from .adversarial import adversarial_pairs
+
+DTYPES = (torch.float32, torch.float64)
+DEFAULT_PAIRS = 10**6
+
+
+@lru_cache(maxsize=1)
+def reference_material() -> Material:
+    """A measured-like target with a specular lobe, generated in memory (synthetic material 1)."""
+    from ..data.synthetic import generate_material
+
+    name, category, table = generate_material(1, seed=0)
+    return Material(name=name, table=table, category=category, source="brdfbench.data.synthetic")
+
+
+@dataclass
+class Context:
+    spec: RepresentationSpec
+    params: dict
+    n_pairs: int
+    _model: Representation | None = None
+
+    def fresh(self) -> Representation:
+        return self.spec.create(**self.params)
+
+    @property
+    def model(self) -> Representation:
+        """A model fitted once to the reference material (or unfitted, if not fittable)."""
+        if self._model is None:
+            model = self.fresh()
+            if "fittable" in self.spec.tags:
+                model.fit(reference_material(), seed=0)
+            self._model = model
+        return self._model
+
+
+# --------------------------------------------------------------------------- checks
+
+CHECKS: dict[str, tuple[frozenset[str], Callable[[Context], None]]] = {}
+
+
+def check(*requires: str):
+    """Register a check that runs when the spec has all `requires` tags."""
+
+    def deco(fn):
+        CHECKS[fn.__name__.removeprefix("check_")] = (frozenset(requires), fn)
+        return fn
+
+    return deco
+
+
+@check()
+def check_protocol(ctx: Context) -> None:
+    cls = ctx.spec.load()
+    assert isinstance(cls, type) and issubclass(cls, Representation), (
+        f"{ctx.spec.target} must be a subclass of brdfbench.protocol.Representation"
+    )
+    missing = {"fittable", "reciprocal", "isotropic"} & ctx.spec.tags - cls.tags
+    assert not missing, f"spec tags {sorted(missing)} are not declared on {cls.__name__}.tags"
+    model = ctx.fresh()
+    assert isinstance(model.params, dict), "params must be a dict of constructor arguments"
+
+
+@check()
+def check_eval_shapes_and_dtypes(ctx: Context) -> None:
+    model = ctx.model
+    for dtype in DTYPES:
+        pairs = adversarial_pairs(64, dtype, seed=1)["uniform"]
+        out = model.eval(*pairs)
+        assert out.shape == (pairs[0].shape[0], 3), f"eval returned shape {tuple(out.shape)}, expected (N, 3)"
+        assert out.dtype == dtype, f"eval on {dtype} returned {out.dtype}"
+        empty = model.eval(torch.zeros(0, 3, dtype=dtype), torch.zeros(0, 3, dtype=dtype))
+        assert empty.shape == (0, 3), f"eval on no pairs returned shape {tuple(empty.shape)}"
+
+
+@check()
+def check_adversarial_finite_nonnegative(ctx: Context) -> None:
+    model = ctx.model
+    for dtype in DTYPES:
+        for family, (wi, wo) in adversarial_pairs(ctx.n_pairs, dtype, seed=2).items():
+            out = model.eval(wi, wo)
+            bad = ~torch.isfinite(out).all(dim=1)
+            assert not bad.any(), _first_fault(f"non-finite value ({family}, {dtype})", wi, wo, out, bad)
+            neg = (out < 0).any(dim=1)
+            assert not neg.any(), _first_fault(f"negative value ({family}, {dtype})", wi, wo, out, neg)
+
+
+@check()
+def check_zero_below_horizon(ctx: Context) -> None:
+    wi, wo = adversarial_pairs(ctx.n_pairs, torch.float64, seed=3)["below_horizon"]
+    out = ctx.model.eval(wi, wo)
+    nonzero = (out != 0).any(dim=1)
+    assert not nonzero.any(), _first_fault("non-zero value at or below the horizon", wi, wo, out, nonzero)
+
+
+@check("reciprocal")
+def check_reciprocity(ctx: Context) -> None:
+    wi, wo = adversarial_pairs(20_000, torch.float64, seed=4)["uniform"]
+    a, b = ctx.model.eval(wi, wo), ctx.model.eval(wo, wi)
+    bad = ~torch.isclose(a, b, rtol=1e-5, atol=1e-8).all(dim=1)
+    assert not bad.any(), _first_fault("f(wi, wo) != f(wo, wi)", wi, wo, a - b, bad)
+
+
+@check("isotropic")
+def check_isotropy(ctx: Context) -> None:
+    wi, wo = adversarial_pairs(20_000, torch.float64, seed=5)["uniform"]
+    angle = torch.tensor(0.7318, dtype=torch.float64)
+    c, s = torch.cos(angle), torch.sin(angle)
+    rot = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
+    a, b = ctx.model.eval(wi, wo), ctx.model.eval(wi @ rot.T, wo @ rot.T)
+    bad = ~torch.isclose(a, b, rtol=1e-5, atol=1e-8).all(dim=1)
+    # Tabulated lookups may land in a neighbouring cell when a pair sits on a cell boundary.
+    allowed = 1e-3 * wi.shape[0] if "tabulated" in ctx.spec.tags else 0
+    assert bad.sum() <= allowed, _first_fault("value changes under a rotation about the normal", wi, wo, a - b, bad)
+
+
+@check("fittable")
+def check_fit_deterministic(ctx: Context) -> None:
+    target = reference_material()
+    a = ctx.fresh().fit(target, seed=7)
+    b = ctx.fresh().fit(target, seed=7)
+    wi, wo = adversarial_pairs(4096, torch.float64, seed=6)["uniform"]
+    va, vb = a.eval(wi, wo), b.eval(wi, wo)
+    assert torch.equal(va, vb), f"two fits with seed 7 differ by up to {float((va - vb).abs().max()):.3g}"
+
+
+@check()
+def check_save_load_roundtrip(ctx: Context) -> None:
+    model = ctx.model
+    with tempfile.TemporaryDirectory() as tmp:
+        path = modelio.save(model, ctx.spec.name, Path(tmp) / "model.safetensors")
+        name, loaded = modelio.load(path)
+    assert name == ctx.spec.name, f"loaded model names itself {name!r}"
+    assert loaded.params == model.params, f"params changed on round trip: {model.params} -> {loaded.params}"
+    for dtype in DTYPES:
+        wi, wo = adversarial_pairs(4096, dtype, seed=8)["uniform"]
+        a, b = model.eval(wi, wo), loaded.eval(wi, wo)
+        assert torch.equal(a, b), f"loaded model differs by up to {float((a - b).abs().max()):.3g} ({dtype})"
+
+
+@check()
+def check_cost_declared(ctx: Context) -> None:
+    nbytes = ctx.model.nbytes
+    assert isinstance(nbytes, int) and nbytes >= 0, f"nbytes must be a non-negative int, got {nbytes!r}"
+    flops = ctx.model.flops_per_eval
+    assert flops is None or (isinstance(flops, int) and flops > 0), f"flops_per_eval must be None or a positive int, got {flops!r}"
+
+
+def _first_fault(what: str, wi, wo, out, mask) -> str:
+    i = int(torch.nonzero(mask)[0])
+    return (
+        f"{what}: {int(mask.sum())} of {mask.numel()} pairs, first wi={wi[i].tolist()} "
+        f"wo={wo[i].tolist()} -> {out[i].tolist()}"
+    )
+
+
+# --------------------------------------------------------------------------- running
+
+
+@dataclass(frozen=True)
+class Check:
+    """One check bound to one plugin; call it to run (raises on failure)."""
+
+    spec_name: str
+    name: str
+    run: Callable[[], None]
+    xfail_reason: str | None = None
+
+    def __call__(self) -> None:
+        self.run()
+
+    def __str__(self) -> str:
+        return f"{self.spec_name}-{self.name}"
+
+
+@dataclass
+class ConformanceReport:
+    plugin: str
+    outcomes: dict[str, str] = field(default_factory=dict)  # check -> passed/failed/xfailed/xpassed
+    details: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def passed(self) -> bool:
+        return not any(v in ("failed", "xpassed") for v in self.outcomes.values())
+
+    def summary(self) -> str:
+        lines = [f"conformance of {self.plugin!r}:"]
+        for name, outcome in self.outcomes.items():
+            lines.append(f"  {outcome:8s} {name}")
+            if name in self.details:
+                lines.append("           " + self.details[name].replace("\n", "\n           "))
+        counts = {k: list(self.outcomes.values()).count(k) for k in ("passed", "failed", "xfailed", "xpassed")}
+        lines.append(", ".join(f"{v} {k}" for k, v in counts.items() if v) or "no checks ran")
+        return "\n".join(lines)
+
+    def raise_on_failure(self) -> "ConformanceReport":
+        if not self.passed:
+            raise AssertionError(self.summary())
+        return self
+
+
+def _resolve(spec_or_name: RepresentationSpec | str) -> RepresentationSpec:
+    if isinstance(spec_or_name, RepresentationSpec):
+        return spec_or_name
+    return registry.get("representations", spec_or_name)
+
+
+def representation_checks(spec_or_name, *, params: dict | None = None, n_pairs: int = DEFAULT_PAIRS) -> list[Check]:
+    """The checks that apply to a representation, sharing one fitted model between them."""
+    spec = _resolve(spec_or_name)
+    ctx = Context(spec, dict(params or {}), n_pairs)
+    return [
+        Check(spec.name, name, (lambda fn=fn: fn(ctx)), spec.xfail_checks.get(name))
+        for name, (requires, fn) in CHECKS.items()
+        if requires <= spec.tags
+    ]
+
+
+def check_representation(spec_or_name, *, params: dict | None = None, n_pairs: int = DEFAULT_PAIRS) -> ConformanceReport:
+    """Run every applicable check; failures are collected, not raised (see raise_on_failure)."""
+    spec = _resolve(spec_or_name)
+    report = ConformanceReport(spec.name)
+    for c in representation_checks(spec, params=params, n_pairs=n_pairs):
+        try:
+            c()
+        except Exception as exc:  # noqa: BLE001 - a check reports any fault of the plugin
+            report.outcomes[c.name] = "xfailed" if c.xfail_reason else "failed"
+            detail = str(exc) if isinstance(exc, AssertionError) else "".join(traceback.format_exception_only(type(exc), exc))
+            report.details[c.name] = (f"expected: {c.xfail_reason}; " if c.xfail_reason else "") + detail.strip()
+        else:
+            report.outcomes[c.name] = "xpassed" if c.xfail_reason else "passed"
+            if c.xfail_reason:
+                report.details[c.name] = f"declared expected failure ({c.xfail_reason}) but it passed"
+    return report
+

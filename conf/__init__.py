@@ -1,0 +1,1 @@
+"""Packaged Hydra configs (import name `brdfbench_conf`)."""

@@ -1,0 +1,1 @@
+"""Leaderboard generation from the results store (import name `brdfbench_leaderboard`)."""

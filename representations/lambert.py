@@ -1,0 +1,64 @@
+"""Lambertian BRDF: f = rho / pi, constant per channel.
+
+The albedo is fitted as pi times the cosine-weighted median of the valid measured values:
+a median, because a mean would be dominated by the specular peak of shiny materials.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from brdfbench import merl
+from brdfbench.protocol import Material, Representation
+
+
+def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    order = np.argsort(values)
+    cum = np.cumsum(weights[order])
+    return float(values[order][np.searchsorted(cum, 0.5 * cum[-1])])
+
+
+class Lambert(Representation):
+    tags = frozenset({"isotropic", "reciprocal", "fittable", "analytic"})
+
+    def __init__(self):
+        super().__init__()
+        self.albedo = torch.full((3,), 0.5, dtype=torch.float64)
+
+    def fit(self, target: Material, *, seed: int = 0) -> "Lambert":
+        wi, wo = _grid_cosines()
+        valid = target.table.valid.reshape(-1) & (wi > 0) & (wo > 0)
+        weights = (wi * wo)[valid]
+        values = target.table.values.reshape(3, -1)[:, valid]
+        self.albedo = torch.tensor([math.pi * weighted_median(v, weights) for v in values], dtype=torch.float64)
+        return self
+
+    def _eval(self, wi, wo):
+        return (self.albedo / math.pi).to(wi.dtype).expand(wi.shape[0], 3).clone()
+
+    def state_dict(self):
+        return {"albedo": self.albedo}
+
+    @classmethod
+    def from_state(cls, params, tensors, metadata):
+        model = cls(**params)
+        model.albedo = tensors["albedo"].double()
+        return model
+
+    @property
+    def flops_per_eval(self) -> int:
+        return 3
+
+
+_COSINES: tuple[np.ndarray, np.ndarray] | None = None
+
+
+def _grid_cosines() -> tuple[np.ndarray, np.ndarray]:
+    global _COSINES
+    if _COSINES is None:
+        wi, wo = merl.grid_directions()
+        _COSINES = (wi[:, 2].numpy(), wo[:, 2].numpy())
+    return _COSINES
