@@ -7,6 +7,7 @@ leaderboard). Subcommands that need no config:
     brdfbench list                      one line per registered plugin
     brdfbench report [--results DIR]    regenerate the leaderboard from the results store
     brdfbench check NAME                run the conformance kit on a representation
+    brdfbench inspect MODEL.safetensors describe a saved model (loads no code)
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from pathlib import Path
 
 from .errors import BrdfbenchError
 
-SUBCOMMANDS = ("list", "report", "check")
+SUBCOMMANDS = ("list", "report", "check", "inspect")
 EXIT_ERROR = 2
 
 
@@ -57,6 +58,15 @@ def cmd_check(args) -> int:
     return 0 if report.passed else 1
 
 
+def cmd_inspect(args) -> int:
+    from . import modelio
+
+    name, model = modelio.load(args.path)
+    print(f"{args.path}: representation {name!r}, params {model.params}, {model.nbytes} bytes"
+          + (f", {model.flops_per_eval} FLOP/eval" if model.flops_per_eval else ""))
+    return 0
+
+
 def _subcommand_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="brdfbench", description="BRDF benchmark utilities")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -70,6 +80,9 @@ def _subcommand_parser() -> argparse.ArgumentParser:
     p.add_argument("name")
     p.add_argument("--pairs", type=int, default=10**6, help="adversarial direction pairs per dtype (default 1e6)")
     p.set_defaults(func=cmd_check)
+    p = sub.add_parser("inspect", help="describe a saved model file")
+    p.add_argument("path")
+    p.set_defaults(func=cmd_inspect)
     return parser
 
 

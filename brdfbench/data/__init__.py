@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
 from ..errors import DataError
-from ..protocol import Material
+
+if TYPE_CHECKING:  # keep `import brdfbench.data.specs` light: listing plugins must not import torch
+    from ..protocol import Material
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,114 @@
+"""End-to-end: the `brdfbench` command, its sweep, its reports and its errors."""
+
+from __future__ import annotations
+
+import os
+import pickle
+import subprocess
+import sys
+
+import pytest
+
+QUICK = ["dataset.params.size=small", "harness=quick", "limit=2"]
+
+
+def brdfbench(*args, cwd, env_extra=None):
+    env = dict(os.environ, **(env_extra or {}))
+    return subprocess.run(
+        [sys.executable, "-m", "brdfbench.cli", *args], cwd=cwd, capture_output=True, text=True, env=env, timeout=600,
+    )
+
+
+def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path):
+    out = brdfbench(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    board = (tmp_path / "res" / "leaderboard.md").read_text()
+    assert "`merl`" in board and "`lambert`" in board
+    assert "fit time (s)" in board and "evals/s" in board and "bytes" in board
+    assert "2 done" in out.stdout
+    again = brdfbench(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert "0 done, 2 already in the store" in again.stdout
+
+
+def test_explicit_multirun_sweep(tmp_path):
+    out = brdfbench("-m", "representation=lambert,merl_trilinear", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    board = (tmp_path / "res" / "leaderboard.md").read_text()
+    assert "`merl-trilinear`" in board and "`lambert`" in board and "`merl`" not in board
+
+
+def test_list_prints_one_line_per_plugin(tmp_path):
+    out = brdfbench("list", cwd=tmp_path)
+    assert out.returncode == 0
+    lines = out.stdout.splitlines()
+    assert any(line.split()[:2] == ["representations", "lambert"] for line in lines)
+    assert any(line.split()[:2] == ["datasets", "synthetic"] for line in lines)
+
+
+def test_unknown_config_key_names_the_key(tmp_path):
+    out = brdfbench("bogus_key=1", f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert out.returncode != 0
+    assert "bogus_key" in out.stderr
+    assert not (tmp_path / "res").exists()
+
+
+def test_unknown_harness_key_names_the_key(tmp_path):
+    out = brdfbench("+harness.n_randm=5", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert out.returncode == 2
+    assert "harness.n_randm" in out.stderr
+    assert not (tmp_path / "res" / "brdfbench.sqlite").exists()
+
+
+def test_unknown_representation_gets_did_you_mean(tmp_path):
+    out = brdfbench("representation.name=lambret", "hydra.mode=RUN", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert out.returncode == 2
+    assert "Did you mean 'lambert'" in out.stderr
+    assert not (tmp_path / "res" / "leaderboard.md").exists()
+
+
+def test_unknown_config_option_lists_choices(tmp_path):
+    out = brdfbench("representation=lambret", f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert out.returncode != 0
+    assert "lambret" in out.stderr and "lambert" in out.stderr
+
+
+def test_merl_folder_that_is_not_a_merl_folder(tmp_path):
+    (tmp_path / "notmerl").mkdir()
+    (tmp_path / "notmerl" / "readme.txt").write_text("hello")
+    out = brdfbench("dataset=merl_folder", f"dataset.params.path={tmp_path}/notmerl", "hydra.mode=RUN",
+                    f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert out.returncode == 2
+    assert "notmerl" in out.stderr
+    assert not (tmp_path / "res" / "leaderboard.md").exists()
+
+
+def test_truncated_merl_file_is_named(tmp_path):
+    folder = tmp_path / "merl"
+    folder.mkdir()
+    (folder / "broken.binary").write_bytes(b"\x5a\x00\x00\x00" * 3 + b"\x00" * 100)
+    out = brdfbench("dataset=merl_folder", f"dataset.params.path={folder}", "hydra.mode=RUN",
+                    f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert out.returncode == 2
+    assert "broken.binary" in out.stderr and "truncated" in out.stderr
+    assert not (tmp_path / "res" / "leaderboard.md").exists()
+
+
+def test_inspect_refuses_a_pickle(tmp_path):
+    path = tmp_path / "model.safetensors"
+    path.write_bytes(pickle.dumps({"weights": [1, 2, 3]}))
+    out = brdfbench("inspect", str(path), cwd=tmp_path)
+    assert out.returncode == 2
+    assert str(path) in out.stderr and "pickle" in out.stderr
+
+
+def test_report_without_store_is_an_error(tmp_path):
+    out = brdfbench("report", "--results", str(tmp_path / "nothing"), cwd=tmp_path)
+    assert out.returncode == 2
+    assert "no results store" in out.stderr
+
+
+@pytest.mark.slow
+def test_default_benchmark_full_size(tmp_path):
+    out = brdfbench(f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr

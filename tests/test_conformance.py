@@ -1,0 +1,103 @@
+"""The conformance kit applied to every registered representation, plus extra parameterisations."""
+
+import pytest
+import torch
+
+from brdfbench import registry
+from brdfbench.specs import RepresentationSpec
+from brdfbench.testing import FAMILIES, adversarial_pairs, check_representation, representation_checks
+
+CASES = [(name, {}) for name in registry.names("representations")] + [("merl", {"mode": "trilinear"})]
+
+
+def _checks():
+    for name, params in CASES:
+        for check in representation_checks(name, params=params):
+            label = f"{check}" + (f"[{','.join(f'{k}={v}' for k, v in params.items())}]" if params else "")
+            marks = [pytest.mark.xfail(reason=check.xfail_reason, strict=True)] if check.xfail_reason else []
+            yield pytest.param(check, id=label, marks=marks)
+
+
+@pytest.mark.parametrize("check", list(_checks()))
+def test_conformance(check):
+    check()
+
+
+def test_adversarial_pairs_cover_every_family_and_hard_case():
+    pairs = adversarial_pairs(7000, torch.float64, seed=0)
+    assert set(pairs) == set(FAMILIES)
+    wi, wo = pairs["mirror"]
+    assert torch.allclose(wi[:, :2], -wo[:, :2]) and torch.equal(wi[:, 2], wo[:, 2])  # θh = 0
+    wi, wo = pairs["identical"]
+    assert torch.equal(wi, wo)
+    wi, wo = pairs["opposite"]
+    assert (wi + wo).norm(dim=1).min() < 1e-5 and (wi[:, 2] > 0).all() and (wo[:, 2] > 0).all()
+    wi, wo = pairs["below_horizon"]
+    assert ((wi[:, 2] <= 0) | (wo[:, 2] <= 0)).all() and ((wi[:, 2] == 0) | (wo[:, 2] == 0)).any()
+    wi, wo = pairs["grazing"]
+    assert wi[:, 2].min() == pytest.approx(torch.cos(torch.deg2rad(torch.tensor(89.99, dtype=torch.float64))))
+    for wi, wo in pairs.values():
+        assert torch.allclose(wi.norm(dim=1), torch.ones(wi.shape[0], dtype=torch.float64))
+
+
+# A deliberately broken third-party plugin: the kit must catch each fault.
+
+from brdfbench_representations.lambert import Lambert  # noqa: E402
+
+
+class NegativeAtGrazing(Lambert):
+    tags = Lambert.tags
+
+    def _eval(self, wi, wo):
+        out = super()._eval(wi, wo)
+        return torch.where((wi[:, 2] < 0.01)[:, None], -out, out)
+
+
+class NotReciprocal(Lambert):
+    tags = Lambert.tags
+
+    def _eval(self, wi, wo):
+        return super()._eval(wi, wo) * (1 + wi[:, 2:3])  # isotropic, but not reciprocal
+
+
+class LeaksBelowHorizon(Lambert):
+    tags = Lambert.tags
+
+    def eval(self, wi, wo):  # overrides the protocol's horizon handling: wrong
+        return self._eval(wi, wo)
+
+
+def _spec(cls, name, **kw):
+    spec = RepresentationSpec(name=name, description="test plugin", target=f"{__name__}:{cls.__name__}", tags=Lambert.tags, **kw)
+    registry.register("representations", spec)
+    return spec
+
+
+@pytest.mark.parametrize(
+    "cls,failing",
+    [
+        (NegativeAtGrazing, "adversarial_finite_nonnegative"),
+        (NotReciprocal, "reciprocity"),
+        (LeaksBelowHorizon, "zero_below_horizon"),
+    ],
+)
+def test_kit_catches_broken_plugins(cls, failing):
+    spec = _spec(cls, f"broken_{cls.__name__.lower()}")
+    try:
+        report = check_representation(spec, n_pairs=20_000)
+        assert report.outcomes[failing] == "failed", report.summary()
+        assert not report.passed
+        with pytest.raises(AssertionError, match=failing):
+            report.raise_on_failure()
+    finally:
+        registry.unregister("representations", spec.name)
+
+
+def test_declared_expected_failure_is_reported_as_xfailed():
+    spec = _spec(NotReciprocal, "xfail_rep", xfail_checks={"reciprocity": "known: models a non-reciprocal sensor"})
+    try:
+        report = check_representation(spec, n_pairs=20_000)
+        assert report.outcomes["reciprocity"] == "xfailed"
+        assert report.passed
+    finally:
+        registry.unregister("representations", spec.name)
