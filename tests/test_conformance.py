@@ -5,7 +5,7 @@ import torch
 
 from brdfbench import registry
 from brdfbench.specs import RepresentationSpec
-from brdfbench.testing import FAMILIES, adversarial_pairs, check_representation, representation_checks
+from brdfbench.testing import FAMILIES, adversarial_pairs, check_metric, check_representation, representation_checks
 
 CASES = [(name, {}) for name in registry.names("representations")] + [("merl", {"mode": "trilinear"})]
 
@@ -21,6 +21,11 @@ def _checks():
 @pytest.mark.parametrize("check", list(_checks()))
 def test_conformance(check):
     check()
+
+
+@pytest.mark.parametrize("name", registry.names("metrics"))
+def test_metric_conformance(name):
+    check_metric(name)
 
 
 def test_adversarial_pairs_cover_every_family_and_hard_case():

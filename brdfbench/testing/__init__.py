@@ -19,12 +19,14 @@ from __future__ import annotations
 
 from .adversarial import FAMILIES, adversarial_pairs
 from .kit import Check, ConformanceReport, check_representation, representation_checks
+from .metrics import check_metric
 
 __all__ = [
     "FAMILIES",
     "Check",
     "ConformanceReport",
     "adversarial_pairs",
+    "check_metric",
     "check_representation",
     "representation_checks",
 ]

@@ -1,0 +1,42 @@
+"""Conformance checks for metric plugins: declared direction and unit, best value on a
+perfect prediction, worse on a worse one, and chunking invariance of the streaming class."""
+
+from __future__ import annotations
+
+import torch
+
+from .. import registry
+from ..specs import MetricSpec
+
+
+def _data(n: int = 4096, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    target = torch.rand(n, 3, generator=g, dtype=torch.float64) * 10
+    cos_i = torch.rand(n, generator=g, dtype=torch.float64)
+    noise = torch.rand(n, 3, generator=g, dtype=torch.float64)
+    return target, cos_i, noise
+
+
+def check_metric(spec_or_name: MetricSpec | str) -> None:
+    """Raise AssertionError naming the first fault of a metric plugin."""
+    spec = spec_or_name if isinstance(spec_or_name, MetricSpec) else registry.get("metrics", spec_or_name)
+    cls = spec.load()
+    metric = cls()
+    assert metric.unit == spec.unit, f"{spec.name}: class unit {metric.unit!r} != spec unit {spec.unit!r}"
+    assert metric.higher_is_better == spec.higher_is_better, f"{spec.name}: class and spec disagree on higher_is_better"
+    target, cos_i, noise = _data()
+
+    def value(pred, chunks=1):
+        m = cls()
+        for part in range(chunks):
+            s = slice(part * len(pred) // chunks, (part + 1) * len(pred) // chunks)
+            m.update(pred[s], target[s], cos_i[s])
+        return m.compute()
+
+    perfect, slightly, badly = value(target), value(target * (1 + 0.05 * noise)), value(target * (1 + 2 * noise))
+    better = (lambda a, b: a > b) if spec.higher_is_better else (lambda a, b: a < b)
+    assert better(perfect, slightly) and better(slightly, badly), (
+        f"{spec.name}: not monotone in error: perfect={perfect}, 5% off={slightly}, 200% off={badly}"
+    )
+    chunked = value(target * (1 + 2 * noise), chunks=7)
+    assert abs(chunked - badly) <= 1e-9 * max(1.0, abs(badly)), f"{spec.name}: chunked {chunked} != whole {badly}"

@@ -1,0 +1,43 @@
+import pandas as pd
+
+from brdfbench_leaderboard import markdown, tables
+
+
+def _df():
+    rows = []
+    for rep, err, fit in (("good", 0.1, 10.0), ("fast", 0.5, 0.01)):
+        for mat in ("a", "b"):
+            rows += [
+                dict(representation=rep, material=mat, metric="l1_log_cos", value=err, unit="log", higher_is_better=False),
+                dict(representation=rep, material=mat, metric="fit_time", value=fit, unit="s", higher_is_better=False),
+                dict(representation=rep, material=mat, metric="evals_per_s", value=1e6, unit="evals/s", higher_is_better=True),
+            ]
+    df = pd.DataFrame(rows)
+    df["status"], df["message"], df["timestamp"] = "ok", "", 1.0
+    df["dataset"], df["dataset_fingerprint"], df["package_version"], df["git_sha"] = "synthetic", "fp", "0.1", "abc"
+    return df
+
+
+def test_ranking_follows_higher_is_better():
+    summary = tables.summarize(_df())
+    assert list(tables.ranking(summary, "l1_log_cos").representation) == ["good", "fast"]
+
+
+def test_markdown_shows_accuracy_beside_cost():
+    text = markdown.render(_df(), "store.sqlite")
+    table_line = next(line for line in text.splitlines() if line.startswith("| 1 |"))
+    assert "`good`" in table_line and "10" in table_line  # accuracy and its fit time on one row
+    assert "fit time (s) ↓" in text and "evals/s ↑" in text
+
+
+def test_failures_listed_only_while_unresolved():
+    df = _df()
+    fail = df.iloc[[0]].assign(status="failed", metric="error", value=None, message="boom", material="c")
+    text = markdown.render(pd.concat([df, fail]), "s")
+    assert "### Failures" in text and "boom" in text
+    fixed = fail.assign(status="ok", metric="l1_log_cos", value=0.2, timestamp=2.0)
+    assert "### Failures" not in markdown.render(pd.concat([df, fail, fixed]), "s")
+
+
+def test_empty_store():
+    assert "empty" in markdown.render(pd.DataFrame(columns=_df().columns), "s")

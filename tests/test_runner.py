@@ -1,0 +1,117 @@
+"""The runner in-process: failures and timeouts become rows, cells are skipped on re-run."""
+
+import time
+
+import pytest
+
+from brdfbench import registry
+from brdfbench.errors import ConfigError
+from brdfbench.report import write_reports
+from brdfbench.runner import HarnessConfig, RunConfig, run
+from brdfbench.specs import RepresentationSpec
+from brdfbench.store import ResultsStore
+from brdfbench_representations.lambert import Lambert
+
+QUICK = HarnessConfig(n_random=4096, throughput_batch=1024)
+
+
+class Explodes(Lambert):
+    def fit(self, target, *, seed=0):
+        if target.category == "metal":
+            raise RuntimeError("cannot fit metals")
+        return super().fit(target, seed=seed)
+
+
+class Hangs(Lambert):
+    def fit(self, target, *, seed=0):
+        time.sleep(30)
+        return self
+
+
+@pytest.fixture
+def plugin():
+    added = []
+
+    def add(cls, name):
+        spec = RepresentationSpec(name=name, description="test", target=f"{__name__}:{cls.__name__}", tags=Lambert.tags)
+        registry.register("representations", spec)
+        added.append(name)
+        return name
+
+    yield add
+    for name in added:
+        registry.unregister("representations", name)
+
+
+def _cfg(tmp_path, synthetic_cache, name, **kw):
+    return RunConfig(
+        representation=name, representation_params={}, label=name, dataset="synthetic",
+        dataset_params={"size": "small", "cache_dir": str(synthetic_cache)}, harness=kw.pop("harness", QUICK),
+        results_dir=tmp_path, **kw,
+    )
+
+
+def test_a_raising_plugin_is_recorded_and_the_sweep_goes_on(tmp_path, synthetic_cache, plugin):
+    name = plugin(Explodes, "explodes")
+    counts = run(_cfg(tmp_path, synthetic_cache, name))
+    df = ResultsStore(tmp_path / "brdfbench.sqlite").frame()
+    failed = df[df.status == "failed"]
+    assert counts["failed"] == len(failed) >= 1 and counts["done"] >= 1
+    assert failed.message.str.contains("cannot fit metals").all()
+    board = write_reports(tmp_path)[0].read_text()
+    assert "### Failures" in board and "cannot fit metals" in board
+
+
+def test_a_hanging_plugin_times_out_as_a_failure(tmp_path, synthetic_cache, plugin):
+    name = plugin(Hangs, "hangs")
+    harness = HarnessConfig(n_random=1024, throughput_batch=256, timeout_s=0.5)
+    t0 = time.perf_counter()
+    counts = run(_cfg(tmp_path, synthetic_cache, name, harness=harness, limit=2))
+    assert counts == {"done": 0, "skipped": 0, "failed": 2}
+    assert time.perf_counter() - t0 < 25  # both cells cut at 0.5 s, not 30 s each
+    df = ResultsStore(tmp_path / "brdfbench.sqlite").frame()
+    assert df.message.str.contains("exceeded the time limit").all()
+
+
+def test_rerun_skips_done_cells_and_config_change_does_not(tmp_path, synthetic_cache):
+    cfg = _cfg(tmp_path, synthetic_cache, "lambert", limit=2)
+    assert run(cfg)["done"] == 2
+    assert run(cfg) == {"done": 0, "skipped": 2, "failed": 0}
+    other = _cfg(tmp_path, synthetic_cache, "lambert", limit=2, seed=1)
+    assert run(other)["done"] == 2
+
+
+def test_results_carry_units_direction_and_provenance(tmp_path, synthetic_cache):
+    run(_cfg(tmp_path, synthetic_cache, "lambert", limit=1))
+    df = ResultsStore(tmp_path / "brdfbench.sqlite").frame()
+    by_metric = df.set_index("metric")
+    assert set(by_metric.index) >= {"l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae", "fit_time", "evals_per_s", "model_bytes"}
+    assert by_metric.loc["evals_per_s", "unit"] == "evals/s" and by_metric.loc["evals_per_s", "higher_is_better"]
+    assert by_metric.loc["fit_time", "unit"] == "s" and not by_metric.loc["fit_time", "higher_is_better"]
+    assert (df.config_hash.str.len() == 16).all() and (df.package_version != "").all()
+    assert (df.value > 0).all()
+
+
+def test_unknown_representation_param_names_the_key(tmp_path, synthetic_cache):
+    cfg = RunConfig(
+        representation="merl", representation_params={"mdoe": "nearest"}, label="merl", dataset="synthetic",
+        dataset_params={}, results_dir=tmp_path,
+    )
+    with pytest.raises(ConfigError, match=r"representation\.params\.mdoe"):
+        run(cfg)
+
+
+def test_bad_param_value_names_the_value(tmp_path, synthetic_cache):
+    cfg = _cfg(tmp_path, synthetic_cache, "merl")
+    cfg = RunConfig(**{**cfg.__dict__, "representation_params": {"mode": "cubic"}})
+    with pytest.raises(ConfigError, match="'cubic'"):
+        run(cfg)
+
+
+def test_accuracy_is_deterministic_given_a_seed(tmp_path, synthetic_cache):
+    frames = []
+    for sub in ("a", "b"):
+        run(_cfg(tmp_path / sub, synthetic_cache, "lambert", limit=2))
+        df = ResultsStore(tmp_path / sub / "brdfbench.sqlite").frame()
+        frames.append(df[df.metric.isin(["l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae"])].sort_values(["material", "metric"]))
+    assert frames[0].value.tolist() == frames[1].value.tolist()
