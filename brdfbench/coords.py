@@ -5,8 +5,20 @@ the local shading frame (z = normal), torch tensors of shape (N, 3), fp32 or fp6
 result keeps the input dtype. Angles come from atan2 of (sine, cosine) pairs rather than
 acos, so they stay accurate at the poles (θh = 0, θd = 0) and at grazing angles.
 
-Conventions: θh, θd in [0, π]; φh in (-π, π]; φd in [0, 2π). When ωi + ωo ≈ 0 the half
-vector is undefined and the normal is used; when θh = 0, φh is 0.
+Conventions: θh, θd in [0, π]; φh in (-π, π]; φd in [0, 2π). An azimuth whose polar
+angle is exactly 0 is 0 (so for h = normal, φh = 0 and φd is the azimuth of ωi); within
+rounding of a pole it is as arbitrary as the rounding (e.g. φd for ωi = ωo). Only when
+ωi + ωo = 0 exactly is the half vector undefined: `half_vector` then picks the unit
+vector ⊥ ωi nearest the normal.
+
+Conditioning (what any method working on rounded unit vectors can achieve, u = unit
+roundoff of the dtype): directions → angles → directions is accurate to a few u
+everywhere. Angles → directions → angles is accurate to a few u in θh, θd, and in φh, φd
+away from the coordinate singularities, but degrades like u / cos θd near θd = π/2 (h is
+undefined for opposite directions), u / sin θh for φh, and u / sin θd + u / sin θh for φd
+(azimuths are undefined at the poles). In fp32 (u ≈ 6e-8) θh, θd stay within 1e-5 rad for
+θd ≤ 89°, and φh, φd for sin θh, sin θd ≥ 0.05 with θd ≤ 84°; tests/test_coords.py
+checks both, and that the fp32 limit near the singular sets lies in the rounded inputs.
 """
 
 from __future__ import annotations
@@ -42,6 +54,7 @@ def vector_to_spherical(v: Tensor) -> tuple[Tensor, Tensor]:
     rho = torch.hypot(v[..., 0], v[..., 1])
     theta = torch.atan2(rho, v[..., 2])
     phi = torch.where(rho > 0, torch.atan2(v[..., 1], v[..., 0]), torch.zeros_like(rho))
+    phi = torch.where(phi == -math.pi, -phi, phi)  # atan2(-0, x < 0) = -π; keep φ in (-π, π]
     return theta, phi
 
 
@@ -59,34 +72,31 @@ def half_vector(wi: Tensor, wo: Tensor) -> Tensor:
     """Unit half vector of (ωi, ωo): ωi + ωo normalised.
 
     Floating-point addition is accurate relative to its result, so ωi + ωo keeps its
-    direction however small it gets; it is rescaled before normalising so that tiny sums
-    do not underflow. For nearly opposite pairs (θd > π/4) the component of ωi + ωo along
-    ωi − ωo is removed: it is zero for exact unit vectors, but the O(eps) norm mismatch of
-    rounded inputs would otherwise tilt h by O(eps / |ωi + ωo|) and break the mirror
-    symmetry ωo = 2(ωi·h)h − ωi. Only when ωi + ωo is exactly zero is h undefined; the
-    unit vector ⊥ ωi nearest the normal is used then (the normal when ωi is horizontal,
-    +x when ωi is ±z), so θd = π/2 and the pair still round-trips.
+    direction however small it gets (it is rescaled before use so that tiny sums do not
+    underflow). For nearly opposite pairs (θd > π/4) h is instead the part of ωi + ωo
+    ⊥ ωi − ωo, computed as d × (s × d) with s = ωi + ωo, d = ωi − ωo: the same direction
+    for exact unit vectors, but ⊥ d to rounding even when the inputs' norms differ by
+    O(eps), which would otherwise tilt h by O(eps / |ωi + ωo|) and break the mirror
+    symmetry ωo = 2(ωi·h)h − ωi that `from_half_diff` relies on. Swapping ωi and ωo
+    negates d and s × d only, so h is bitwise the same either way. Only when ωo = −ωi
+    exactly is h undefined; then the unit vector ⊥ ωi nearest the normal is used (the
+    normal when ωi is horizontal, +x when ωi = ±z), so θd = π/2 and the pair still
+    round-trips.
     """
     s = wi + wo
     diff = wi - wo
-    s2 = (s * s).sum(-1, keepdim=True)
-    d2 = (diff * diff).sum(-1, keepdim=True)
-    opposite = d2 > s2
-    proj = (s * diff).sum(-1, keepdim=True) / torch.where(opposite, d2, torch.ones_like(d2))
-    s = torch.where(opposite, s - proj * diff, s)
+    opposite = (diff * diff).sum(-1, keepdim=True) > (s * s).sum(-1, keepdim=True)
     scale = s.abs().amax(dim=-1, keepdim=True)
-    ok = scale > 0
-    h = normalize(s / torch.where(ok, scale, torch.ones_like(scale)))
-    # Fallback for ωo = −ωi exactly: z − (z·ωi) ωi, or +x when that vanishes.
-    z = torch.zeros_like(wi)
-    z[..., 2] = 1.0
-    t = z - wi[..., 2:3] * wi
-    t_scale = t.abs().amax(dim=-1, keepdim=True)
-    t_ok = t_scale > 64.0 * torch.finfo(wi.dtype).eps
-    x = torch.zeros_like(wi)
-    x[..., 0] = 1.0
-    fallback = torch.where(t_ok, normalize(t / torch.where(t_ok, t_scale, torch.ones_like(t_scale))), x)
-    return torch.where(ok, h, fallback)
+    s = s / torch.where(scale > 0, scale, torch.ones_like(scale))
+    n = torch.linalg.cross(s, diff)
+    # ωo = −ωi exactly: s = 0. Use z × d instead (h ∝ d × (z × d), the normal projected
+    # off ωi), or x × d when d ∥ z (h = +x). Both flip with d, keeping the swap symmetry.
+    for axis in ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0]):
+        e = wi.new_tensor(axis).expand_as(wi)
+        n = torch.where((n == 0).all(-1, keepdim=True), torch.linalg.cross(e, diff), n)
+    v = torch.where(opposite, torch.linalg.cross(diff, n), s)
+    scale = v.abs().amax(dim=-1, keepdim=True)
+    return normalize(v / torch.where(scale > 0, scale, torch.ones_like(scale)))
 
 
 def to_half_diff(wi: Tensor, wo: Tensor) -> HalfDiff:

@@ -64,7 +64,8 @@ class MerlTable:
         return np.all(self.raw >= 0, axis=0)
 
     def lookup(self, wi: torch.Tensor, wo: torch.Tensor, mode: str = "nearest") -> torch.Tensor:
-        """Raw table values (N, 3) at direction pairs, negatives included, as the reference returns them."""
+        """BRDF values (N, 3) float64 at direction pairs (raw × channel scales, negatives
+        included), as the reference returns them."""
         if mode == "nearest":
             return lookup_nearest(self.values, wi, wo)
         if mode == "trilinear":
@@ -83,7 +84,9 @@ def read_binary(path: str | os.PathLike) -> MerlTable:
     """Read and validate a MERL `.binary` file."""
     path = Path(path)
     try:
-        raw = path.read_bytes()
+        with open(path, "rb") as f:
+            raw = f.read(FILE_BYTES + 1)  # bounded: an oversized file (or a device) is not read whole
+            size = os.fstat(f.fileno()).st_size if len(raw) > FILE_BYTES else len(raw)
     except IsADirectoryError:
         raise _fail(path, "is a directory, not a MERL .binary file") from None
     except OSError as exc:
@@ -96,7 +99,7 @@ def read_binary(path: str | os.PathLike) -> MerlTable:
     if len(raw) < FILE_BYTES:
         raise _fail(path, f"truncated MERL file: {len(raw)} bytes, expected {FILE_BYTES}")
     if len(raw) > FILE_BYTES:
-        raise _fail(path, f"oversized MERL file: {len(raw)} bytes, expected {FILE_BYTES}")
+        raise _fail(path, f"oversized MERL file: {max(size, len(raw))} bytes, expected {FILE_BYTES}")
     data = np.frombuffer(raw, dtype="<f8", offset=HEADER_BYTES).reshape(3, *SHAPE)
     bad = ~np.isfinite(data)
     if bad.any():
@@ -125,9 +128,15 @@ def write_binary(path: str | os.PathLike, table: MerlTable) -> None:
 
 
 def theta_half_index(theta_h: torch.Tensor) -> torch.Tensor:
-    """Reference θh index: int(sqrt(θh / (π/2) · 90 · 90)), 0 for θh <= 0, clamped to [0, 89]."""
+    """Reference θh index: int(sqrt(θh / (π/2) · 90 · 90)), 0 for θh <= 0, clamped to [0, 89].
+
+    The square root is numpy's (IEEE, correctly rounded, as C's sqrt): torch's float64
+    sqrt on AVX-512 CPUs can be 1 ulp off, which moves θh right below a cell edge
+    (sqrt(k² − ulp) rounds to k) into the wrong cell.
+    """
     t = theta_h.double()
-    warped = torch.sqrt(torch.clamp(t / (math.pi / 2.0) * RES_THETA_H * RES_THETA_H, min=0.0))
+    x = torch.clamp(t / (math.pi / 2.0) * RES_THETA_H * RES_THETA_H, min=0.0)
+    warped = torch.from_numpy(np.sqrt(x.detach().cpu().numpy())).to(t.device)
     idx = torch.clamp(warped.long(), 0, RES_THETA_H - 1)
     return torch.where(t <= 0, torch.zeros_like(idx), idx)
 
@@ -138,9 +147,14 @@ def theta_diff_index(theta_d: torch.Tensor) -> torch.Tensor:
 
 
 def fold_phi_diff(phi_d: torch.Tensor) -> torch.Tensor:
-    """φd in [0, 2π) folded by reciprocity (φd ~ φd + π) into [0, π)."""
+    """φd in [0, 2π) folded by reciprocity (φd ~ φd + π) into [0, π].
+
+    As the reference: its atan2 gives φd in [−π, π] and only negatives move up by π, so
+    φd = π itself stays π (and lands in the last cell, 179, after clamping), while
+    φd in (π, 2π) — the reference's negatives — maps to φd − π.
+    """
     p = phi_d.double()
-    return torch.where(p >= math.pi, p - math.pi, p)
+    return torch.where(p > math.pi, p - math.pi, p)
 
 
 def phi_diff_index(phi_d: torch.Tensor) -> torch.Tensor:

@@ -53,6 +53,8 @@ class Representation(ABC):
         if wi.dtype != wo.dtype or not wi.dtype.is_floating_point:
             raise ValueError(f"eval expects matching floating dtypes, got {wi.dtype} and {wo.dtype}")
         mask = above_horizon(wi, wo)
+        if bool(mask.all()):  # the common case: no masked copies
+            return self._eval(wi, wo).to(wi.dtype)
         out = torch.zeros(wi.shape[0], 3, dtype=wi.dtype)
         if mask.any():
             out[mask] = self._eval(wi[mask], wo[mask]).to(wi.dtype)
