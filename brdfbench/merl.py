@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -236,8 +236,13 @@ def grid_angles(dtype=torch.float64) -> coords.HalfDiff:
     return coords.HalfDiff(th.reshape(-1).to(dtype), zeros.to(dtype), td.reshape(-1).to(dtype), pd.reshape(-1).to(dtype))
 
 
+@lru_cache(maxsize=2)
 def grid_directions(dtype=torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
-    """Direction pairs (N_CELLS, 3) at the cell centres, in table order."""
+    """Direction pairs (N_CELLS, 3) at the cell centres, in table order.
+
+    Cached (about 70 MB in fp64): every caller gets the same tensors, so never modify
+    them in place.
+    """
     g = grid_angles(torch.float64)
     wi, wo = coords.from_half_diff(g.theta_h, g.phi_h, g.theta_d, g.phi_d)
     return wi.to(dtype), wo.to(dtype)

@@ -29,7 +29,7 @@ class Lambert(Representation):
         self.albedo = torch.full((3,), 0.5, dtype=torch.float64)
 
     def fit(self, target: Material, *, seed: int = 0) -> "Lambert":
-        wi, wo = _grid_cosines()
+        wi, wo = (d[:, 2].numpy() for d in merl.grid_directions())
         valid = target.table.valid.reshape(-1) & (wi > 0) & (wo > 0)
         weights = (wi * wo)[valid]
         values = target.table.values.reshape(3, -1)[:, valid]
@@ -52,13 +52,3 @@ class Lambert(Representation):
     def flops_per_eval(self) -> int:
         return 3
 
-
-_COSINES: tuple[np.ndarray, np.ndarray] | None = None
-
-
-def _grid_cosines() -> tuple[np.ndarray, np.ndarray]:
-    global _COSINES
-    if _COSINES is None:
-        wi, wo = merl.grid_directions()
-        _COSINES = (wi[:, 2].numpy(), wo[:, 2].numpy())
-    return _COSINES

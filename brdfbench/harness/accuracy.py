@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import torch
 
+from .. import merl
 from ..protocol import Material, Representation
 from ..specs import MetricSpec
 from . import Measurement, directions
@@ -37,7 +38,7 @@ def evaluate_accuracy(
         raise ValueError(f"metrics with unknown domain(s): {', '.join(sorted(unknown))}")
 
     if "merl_grid" in by_domain:
-        wi, wo = directions.grid(torch.float64)
+        wi, wo = merl.grid_directions(torch.float64)
         valid = torch.from_numpy(target.table.valid.reshape(-1)) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
         wi, wo = wi[valid], wo[valid]
         ref = torch.from_numpy(target.table.values.reshape(3, -1)).T[valid]

@@ -1,4 +1,4 @@
-"""Direction sets the harnesses evaluate on, cached because they are reused per material."""
+"""Random direction sets the harnesses evaluate on, cached because they are reused per material."""
 
 from __future__ import annotations
 
@@ -6,14 +6,6 @@ import math
 from functools import lru_cache
 
 import torch
-
-from .. import merl
-
-
-@lru_cache(maxsize=2)
-def grid(dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
-    """MERL cell-centre direction pairs in table order (read-only by convention)."""
-    return merl.grid_directions(dtype)
 
 
 def uniform_hemisphere(n: int, generator: torch.Generator, dtype=torch.float64) -> torch.Tensor:
