@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from . import coords
+from .atomic import replacing
 from .errors import DataError
 
 RES_THETA_H = 90
@@ -114,14 +115,9 @@ def write_binary(path: str | os.PathLike, table: MerlTable) -> None:
     raw = np.asarray(table.raw, dtype="<f8")
     if not np.all(np.isfinite(raw)):
         raise ValueError(f"refusing to write {path}: the table has non-finite cells")
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as f:
-            f.write(np.asarray(SHAPE, dtype="<i4").tobytes())
-            f.write(raw.tobytes())
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    with replacing(path) as tmp, open(tmp, "wb") as f:
+        f.write(np.asarray(SHAPE, dtype="<i4").tobytes())
+        f.write(raw.tobytes())
 
 
 # --------------------------------------------------------------------------- indexing

@@ -16,6 +16,7 @@ import safetensors.torch
 import torch
 
 from . import __version__, registry
+from .atomic import replacing
 from .errors import ModelFileError
 from .protocol import Representation
 
@@ -42,12 +43,8 @@ def save(model: Representation, name: str, path: str | os.PathLike) -> Path:
     }
     tensors = {k: v.detach().contiguous().cpu() for k, v in model.state_dict().items()}
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
+    with replacing(path) as tmp:
         safetensors.torch.save_file(tensors, str(tmp), metadata={"brdfbench": json.dumps(header)})
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
     return path
 
 

@@ -2,17 +2,11 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
+from .atomic import replacing
 from .errors import DataError
 from .store import ResultsStore
-
-
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
 
 
 def write_reports(results_dir: Path) -> list[Path]:
@@ -24,5 +18,7 @@ def write_reports(results_dir: Path) -> list[Path]:
         raise DataError(f"{db}: no results store here (run the benchmark first)")
     df = ResultsStore(db).frame()
     md = results_dir / "leaderboard.md"
-    _write_atomic(md, render(df, str(db)))
+    text = render(df, str(db))
+    with replacing(md) as tmp:
+        tmp.write_text(text, encoding="utf-8")
     return [md]
