@@ -62,7 +62,9 @@ def load(path: str | os.PathLike) -> tuple[str, Representation]:
     try:
         with safetensors.safe_open(str(path), framework="pt") as f:
             meta = f.metadata() or {}
-            tensors = {k: f.get_tensor(k) for k in f.keys()}
+            # Fresh, aligned copies: tensors viewing the file's buffer at arbitrary offsets make
+            # MKL pick other kernels, and a loaded model would differ from the saved one in the last bit.
+            tensors = {k: f.get_tensor(k).clone(memory_format=torch.contiguous_format) for k in f.keys()}
     except Exception as exc:
         raise ModelFileError(f"{path}: not a valid safetensors model file ({exc})") from None
     try:

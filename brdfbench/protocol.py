@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Iterable
 
 import torch
 
@@ -69,6 +69,16 @@ class Representation(ABC):
     def fit(self, target: Material, *, seed: int = 0) -> "Representation":
         """Fit to a measured material; returns self."""
 
+    # -- training (representations with state shared across materials) ------------
+    #: True for representations that learn shared state (e.g. a PCA basis) from a
+    #: training split before `fit` projects one material onto it. The runner then
+    #: cross-validates: each material is fitted by a model trained without it.
+    needs_training: ClassVar[bool] = False
+
+    def train(self, materials: Iterable[Material], *, seed: int = 0) -> "Representation":
+        """Learn the shared state from training materials (consumed one at a time); returns self."""
+        raise NotImplementedError(f"{type(self).__name__} does not train on a split")
+
     # -- persistence -------------------------------------------------------------
     @abstractmethod
     def state_dict(self) -> dict[str, torch.Tensor]:
@@ -86,8 +96,13 @@ class Representation(ABC):
     # -- cost --------------------------------------------------------------------
     @property
     def nbytes(self) -> int:
-        """Bytes of the fitted model's parameters."""
+        """Bytes of one fitted material's parameters (shared state excluded, see shared_nbytes)."""
         return sum(t.numel() * t.element_size() for t in self.state_dict().values())
+
+    @property
+    def shared_nbytes(self) -> int:
+        """Bytes shared by every material (e.g. a PCA basis); not included in `nbytes`."""
+        return 0
 
     @property
     def flops_per_eval(self) -> int | None:

@@ -40,6 +40,7 @@ class HarnessConfig:
     dtype: str = "float32"
     throughput_batch: int = 2**16
     timeout_s: float | None = 600.0
+    folds: int = 4  # cross-validation folds for representations that train on a split
 
 
 @dataclass(frozen=True)
@@ -107,36 +108,78 @@ def run(cfg: RunConfig) -> dict[str, int]:
             git_sha=git_sha(), timestamp=now(),
         )
 
-    bar = tqdm(dataset.materials, desc=f"{cfg.label} on {cfg.dataset}", unit="material", dynamic_ncols=True)
-    for name in bar:
-        if store.has_cell(cfg.label, chash, dataset.fingerprint, name):
-            counts["skipped"] += 1
+    bar = tqdm(total=len(dataset), desc=f"{cfg.label} on {cfg.dataset}", unit="material", dynamic_ncols=True)
+    for train_names, fit_names in plan_folds(dataset.materials, rep_cls.needs_training, cfg.harness.folds, cfg.seed):
+        pending = [n for n in fit_names if not store.has_cell(cfg.label, chash, dataset.fingerprint, n)]
+        counts["skipped"] += len(fit_names) - len(pending)
+        bar.update(len(fit_names) - len(pending))
+        if not pending:
             continue
-        material = dataset.load(name)  # bad data raises DataError: stop, naming the file
-        try:
-            with time_limit(cfg.harness.timeout_s, f"{cfg.label} on {name}"):
-                torch.manual_seed(cfg.seed)
-                model = rep_spec.create(**cfg.representation_params)
-                t0 = time.perf_counter()
-                model.fit(material, seed=cfg.seed)
-                fit_s = time.perf_counter() - t0
-                measurements = evaluate_accuracy(
-                    model, material, metric_specs, n_random=cfg.harness.n_random, seed=cfg.seed, dtype=dtype,
-                )
-                measurements.append(Measurement("fit_time", fit_s, "s", False))
-                measurements.append(evaluation_throughput(model, batch=cfg.harness.throughput_batch, seed=cfg.seed, dtype=dtype))
-                measurements.extend(model_size(model))
-                if cfg.save_models:
-                    modelio.save(model, cfg.representation, cfg.results_dir / "models" / dataset.fingerprint / cfg.label / f"{name}.safetensors")
-        except BrdfbenchError:
-            raise
-        except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
-            log.warning("%s failed on %s: %s", cfg.label, name, exc)
-            message = "".join(traceback.format_exception_only(type(exc), exc)).strip()
-            store.write_cell([row(name, material.category, None, "failed", message)])
-            counts["failed"] += 1
-            continue
-        store.write_cell([row(name, material.category, m) for m in measurements])
-        counts["done"] += 1
-        bar.set_postfix(fit_s=f"{fit_s:.2f}")
+        trained, extra = None, []
+        if train_names is not None:
+            bar.set_postfix_str(f"training on {len(train_names)} materials")
+            try:
+                with time_limit(cfg.harness.timeout_s, f"training {cfg.label}"):
+                    torch.manual_seed(cfg.seed)
+                    trained = rep_spec.create(**cfg.representation_params)
+                    t0 = time.perf_counter()
+                    trained.train((dataset.load(n) for n in train_names), seed=cfg.seed)
+                    extra = [Measurement("train_time", time.perf_counter() - t0, "s", False)]
+            except BrdfbenchError:
+                raise
+            except Exception as exc:  # a failed training fails every cell of its fold, and the sweep goes on
+                log.warning("training %s failed: %s", cfg.label, exc)
+                message = "training failed: " + "".join(traceback.format_exception_only(type(exc), exc)).strip()
+                for name in pending:
+                    store.write_cell([row(name, dataset.category(name), None, "failed", message)])
+                    counts["failed"] += 1
+                    bar.update(1)
+                continue
+        for name in pending:
+            material = dataset.load(name)  # bad data raises DataError: stop, naming the file
+            try:
+                with time_limit(cfg.harness.timeout_s, f"{cfg.label} on {name}"):
+                    torch.manual_seed(cfg.seed)
+                    model = trained if trained is not None else rep_spec.create(**cfg.representation_params)
+                    t0 = time.perf_counter()
+                    model.fit(material, seed=cfg.seed)
+                    fit_s = time.perf_counter() - t0
+                    measurements = evaluate_accuracy(
+                        model, material, metric_specs, n_random=cfg.harness.n_random, seed=cfg.seed, dtype=dtype,
+                    )
+                    measurements.append(Measurement("fit_time", fit_s, "s", False))
+                    measurements.extend(extra)
+                    measurements.append(evaluation_throughput(model, batch=cfg.harness.throughput_batch, seed=cfg.seed, dtype=dtype))
+                    measurements.extend(model_size(model))
+                    if cfg.save_models:
+                        modelio.save(model, cfg.representation, cfg.results_dir / "models" / dataset.fingerprint / cfg.label / f"{name}.safetensors")
+            except BrdfbenchError:
+                raise
+            except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
+                log.warning("%s failed on %s: %s", cfg.label, name, exc)
+                message = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+                store.write_cell([row(name, material.category, None, "failed", message)])
+                counts["failed"] += 1
+            else:
+                store.write_cell([row(name, material.category, m) for m in measurements])
+                counts["done"] += 1
+                bar.set_postfix(fit_s=f"{fit_s:.2f}")
+            bar.update(1)
+    bar.close()
     return counts
+
+
+def plan_folds(materials: tuple[str, ...], needs_training: bool, folds: int, seed: int) -> list[tuple[list[str] | None, list[str]]]:
+    """(training materials, materials to fit) pairs.
+
+    A representation without training fits every material in one pass. One that trains
+    is cross-validated over `folds` folds: each material is fitted exactly once, by a
+    model trained on the other folds, so it is never scored on data it learnt from.
+    """
+    if not needs_training:
+        return [(None, list(materials))]
+    if not 2 <= folds <= len(materials):
+        raise ConfigError(f"harness.folds={folds}: cross-validation needs 2 <= folds <= {len(materials)} (the number of materials)")
+    order = torch.randperm(len(materials), generator=torch.Generator().manual_seed(seed)).tolist()
+    groups = [sorted(materials[i] for i in order[f::folds]) for f in range(folds)]
+    return [([m for g in groups if g is not group for m in g], group) for group in groups]

@@ -11,8 +11,10 @@ from . import tables
 
 COST_LABELS = {
     "fit_time": "fit time (s) ↓",
+    "train_time": "train time (s) ↓",
     "evals_per_s": "evals/s ↑",
-    "model_bytes": "bytes ↓",
+    "model_bytes": "bytes/material ↓",
+    "shared_bytes": "shared bytes ↓",
     "flops_per_eval": "FLOP/eval ↓",
 }
 
@@ -64,7 +66,9 @@ def dataset_section(name: str, fingerprint: str, df: pd.DataFrame) -> list[str]:
             "### Accuracy and its cost",
             "",
             f"Ranked by mean `{primary}` over materials. Accuracy columns are means over materials; fit time is the "
-            "mean per material, evals/s and bytes the median. ↓ lower is better, ↑ higher is better.",
+            "mean per material, evals/s and bytes the median. Representations that train on a split (train time, "
+            "shared bytes) are cross-validated: each material is scored by a model trained without it. "
+            "↓ lower is better, ↑ higher is better.",
             "",
             *_table(header, rows),
             "",

@@ -7,7 +7,14 @@ import pandas as pd
 #: Accuracy metric used to rank, first one present wins.
 PRIMARY_METRICS = ("l1_log_cos", "l1_log", "l1", "hdr_rmse")
 #: Cost columns shown beside accuracy, with the aggregate that makes sense for each.
-COST_METRICS = {"fit_time": "mean", "evals_per_s": "median", "model_bytes": "median", "flops_per_eval": "median"}
+COST_METRICS = {
+    "fit_time": "mean",
+    "train_time": "mean",
+    "evals_per_s": "median",
+    "model_bytes": "median",
+    "shared_bytes": "median",
+    "flops_per_eval": "median",
+}
 
 
 def summarize(df: pd.DataFrame) -> pd.DataFrame:

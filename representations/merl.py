@@ -1,47 +1,92 @@
 """The tabulated MERL table itself as a representation: the ground-truth baseline.
 
 Nearest-cell lookup reproduces the reference reader; trilinear interpolates between cell
-centres. Invalid (negative) cells evaluate to 0, so the output is always non-negative.
+centres. With `downsample` = x > 1 the table keeps one sample per block of x cells in
+each dimension (the block's centre cell, or its valid cell nearest the centre) and
+reconstructs by nearest neighbour: the baseline of the sparse-reconstruction experiment.
+Invalid (negative) cells evaluate to 0, so the output is always non-negative.
 """
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import torch
 
+from brdfbench import merl
 from brdfbench.errors import ConfigError
 from brdfbench.merl import MerlTable
 from brdfbench.protocol import Material, Representation
 
 MODES = ("nearest", "trilinear")
+DENSITIES = (1, 2, 4, 8, 16, 24, 32)
+
+
+def block_samples(raw: np.ndarray, x: int) -> np.ndarray:
+    """One sample per x×x×x block of a (3, 90, 90, 180) table: (3, ⌈90/x⌉, ⌈90/x⌉, ⌈180/x⌉).
+
+    The sample is the block's centre cell where valid, else its valid cell nearest the
+    centre (in index distance), else invalid.
+    """
+    nb = [math.ceil(n / x) for n in merl.SHAPE]
+    padded = np.full((3, *(b * x for b in nb)), merl.INVALID_RAW)
+    padded[:, : merl.SHAPE[0], : merl.SHAPE[1], : merl.SHAPE[2]] = raw
+    blocks = padded.reshape(3, nb[0], x, nb[1], x, nb[2], x).transpose(0, 1, 3, 5, 2, 4, 6).reshape(3, *nb, x**3)
+    offset = np.arange(x) - (x - 1) / 2
+    distance = (offset[:, None, None] ** 2 + offset[None, :, None] ** 2 + offset[None, None, :] ** 2).reshape(-1)
+    valid = np.all(blocks >= 0, axis=0)  # (*nb, x³)
+    score = np.where(valid, distance, np.inf)
+    choice = np.argmin(score, axis=-1)  # nearest valid to the centre; ties resolved by the lowest index
+    return np.take_along_axis(blocks, choice[None, ..., None], axis=-1)[..., 0]
 
 
 class TabulatedMERL(Representation):
     tags = frozenset({"isotropic", "reciprocal", "fittable", "tabulated"})
 
-    def __init__(self, mode: str = "nearest"):
+    def __init__(self, mode: str = "nearest", downsample: int = 1):
         if mode not in MODES:
             raise ConfigError(f"merl: unknown mode {mode!r}; expected one of {', '.join(MODES)}")
-        super().__init__(mode=mode)
+        if downsample not in DENSITIES:
+            raise ConfigError(f"merl: downsample={downsample!r}; expected one of {', '.join(map(str, DENSITIES))}")
+        if downsample > 1 and mode != "nearest":
+            raise ConfigError(f"merl: downsample={downsample} reconstructs by nearest neighbour; mode={mode!r} is not supported with it")
+        super().__init__(mode=mode, downsample=downsample)
         self.mode = mode
+        self.downsample = downsample
         self.table: MerlTable | None = None
+        self.samples: np.ndarray | None = None  # (3, ⌈90/x⌉, ⌈90/x⌉, ⌈180/x⌉) raw values when downsampled
 
     def fit(self, target: Material, *, seed: int = 0) -> "TabulatedMERL":
-        self.table = target.table
+        if self.downsample == 1:
+            self.table = target.table
+        else:
+            self.samples = block_samples(target.table.raw, self.downsample)
         return self
 
     def _eval(self, wi, wo):
-        if self.table is None:
+        if self.downsample == 1:
+            if self.table is None:
+                raise RuntimeError("merl: evaluate after fit() or load")
+            return self.table.lookup(wi, wo, self.mode).clamp_min(0.0)
+        if self.samples is None:
             raise RuntimeError("merl: evaluate after fit() or load")
-        return self.table.lookup(wi, wo, self.mode).clamp_min(0.0)
+        ih, id_, ip = merl.cell_indices(wi, wo)
+        x = self.downsample
+        raw = torch.from_numpy(self.samples)[:, ih // x, id_ // x, ip // x].T
+        scales = torch.tensor(merl.CHANNEL_SCALES, dtype=torch.float64)
+        return (raw * scales).clamp_min(0.0)
 
     def state_dict(self):
-        if self.table is None:
-            return {}
-        return {"raw": torch.from_numpy(self.table.raw)}
+        if self.downsample > 1:
+            return {} if self.samples is None else {"samples": torch.from_numpy(self.samples)}
+        return {} if self.table is None else {"raw": torch.from_numpy(self.table.raw)}
 
     @classmethod
     def from_state(cls, params, tensors, metadata):
         model = cls(**params)
         if "raw" in tensors:
             model.table = MerlTable(tensors["raw"].double().numpy())
+        if "samples" in tensors:
+            model.samples = tensors["samples"].double().numpy()
         return model

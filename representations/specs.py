@@ -14,3 +14,9 @@ LAMBERT = RepresentationSpec(
     target="brdfbench_representations.lambert:Lambert",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
 )
+PCA = RepresentationSpec(
+    name="pca",
+    description="PCA of log-relative, cosine-weighted MERL tables (Nielsen et al. 2015); trained on a split, cross-validated",
+    target="brdfbench_representations.pca:PCA",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "tabulated", "needs_training"}),
+)

@@ -7,7 +7,11 @@ from brdfbench import registry
 from brdfbench.specs import RepresentationSpec
 from brdfbench.testing import FAMILIES, adversarial_pairs, check_metric, check_representation, representation_checks
 
-CASES = [(name, {}) for name in registry.names("representations")] + [("merl", {"mode": "trilinear"})]
+CASES = [(name, {}) for name in registry.names("representations")] + [
+    ("merl", {"mode": "trilinear"}),
+    ("merl", {"downsample": 8}),
+    ("merl", {"downsample": 24}),
+]
 
 
 def _checks():

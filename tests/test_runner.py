@@ -115,3 +115,23 @@ def test_accuracy_is_deterministic_given_a_seed(tmp_path, synthetic_cache):
         df = ResultsStore(tmp_path / sub / "brdfbench.sqlite").frame()
         frames.append(df[df.metric.isin(["l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae"])].sort_values(["material", "metric"]))
     assert frames[0].value.tolist() == frames[1].value.tolist()
+
+
+def test_trained_representation_is_cross_validated_over_every_material(tmp_path, synthetic_cache):
+    harness = HarnessConfig(n_random=2048, throughput_batch=512, folds=3)
+    counts = run(_cfg(tmp_path, synthetic_cache, "pca", harness=harness))
+    assert counts == {"done": 6, "skipped": 0, "failed": 0}
+    df = ResultsStore(tmp_path / "brdfbench.sqlite").frame()
+    assert df.material.nunique() == 6
+    per_metric = df.groupby("metric").size()
+    assert per_metric["train_time"] == 6 and per_metric["shared_bytes"] == 6
+    assert run(_cfg(tmp_path, synthetic_cache, "pca", harness=harness))["skipped"] == 6
+    board = write_reports(tmp_path)[0].read_text()
+    assert "train time (s)" in board and "shared bytes" in board and "bytes/material" in board
+
+
+def test_k_too_large_stops_the_run_with_a_clear_error(tmp_path, synthetic_cache):
+    cfg = _cfg(tmp_path, synthetic_cache, "pca", harness=HarnessConfig(n_random=1024, throughput_batch=256, folds=2))
+    cfg = RunConfig(**{**cfg.__dict__, "representation_params": {"k": 300}})
+    with pytest.raises(ConfigError, match="k=300 is larger than"):
+        run(cfg)

@@ -30,6 +30,9 @@ class Dataset:
             raise DataError(f"dataset {self.name!r} has no material {material!r}; it has {len(self.materials)} materials")
         return self.loader(material)
 
+    def category(self, material: str) -> str:
+        return (self.categories or {}).get(material, "unknown")
+
     def __iter__(self) -> Iterator[Material]:
         return (self.load(m) for m in self.materials)
 

@@ -32,6 +32,8 @@ def evaluation_throughput(
 
 def model_size(model: Representation) -> list[Measurement]:
     out = [Measurement("model_bytes", float(model.nbytes), "B", False)]
+    if model.shared_nbytes:
+        out.append(Measurement("shared_bytes", float(model.shared_nbytes), "B", False))
     flops = model.flops_per_eval
     if flops is not None:
         out.append(Measurement("flops_per_eval", float(flops), "FLOP", False))

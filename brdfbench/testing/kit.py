@@ -29,6 +29,19 @@ def reference_material() -> Material:
     return Material(name=name, table=table, category=category, source="brdfbench.data.synthetic")
 
 
+#: Synthetic materials a `needs_training` plugin trains on; the reference material is not among them.
+TRAINING_INDICES = range(2, 8)
+
+
+def training_materials():
+    """The training split for plugins that need one, generated lazily (one table in memory at a time)."""
+    from ..data.synthetic import generate_material
+
+    for i in TRAINING_INDICES:
+        name, category, table = generate_material(i, seed=0)
+        yield Material(name=name, table=table, category=category, source="brdfbench.data.synthetic")
+
+
 @dataclass
 class Context:
     spec: RepresentationSpec
@@ -37,7 +50,11 @@ class Context:
     _model: Representation | None = None
 
     def fresh(self) -> Representation:
-        return self.spec.create(**self.params)
+        """A new model; one that needs training comes trained on `training_materials()`."""
+        model = self.spec.create(**self.params)
+        if model.needs_training:
+            model.train(training_materials(), seed=0)
+        return model
 
     @property
     def model(self) -> Representation:
@@ -71,8 +88,11 @@ def check_protocol(ctx: Context) -> None:
     assert isinstance(cls, type) and issubclass(cls, Representation), (
         f"{ctx.spec.target} must be a subclass of brdfbench.protocol.Representation"
     )
-    missing = {"fittable", "reciprocal", "isotropic"} & ctx.spec.tags - cls.tags
+    missing = {"fittable", "reciprocal", "isotropic", "needs_training"} & ctx.spec.tags - cls.tags
     assert not missing, f"spec tags {sorted(missing)} are not declared on {cls.__name__}.tags"
+    assert cls.needs_training == ("needs_training" in ctx.spec.tags), (
+        f"{cls.__name__}.needs_training={cls.needs_training} disagrees with the spec's 'needs_training' tag"
+    )
     model = ctx.fresh()
     assert isinstance(model.params, dict), "params must be a dict of constructor arguments"
 

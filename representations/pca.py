@@ -1,0 +1,209 @@
+"""PCA of tabulated BRDFs after Nielsen, Jensen and Ramamoorthi (2015).
+
+Each training material's MERL values are mapped log-relative to a reference BRDF (the
+per-cell, per-channel median of the training set), cosine-weighted:
+
+    x = ln((ρ·w + ε) / (ρ_ref·w + ε)),  w = cosθi·cosθo,  ε = 1e-3,
+
+over the cells where both directions are above the horizon. As in Nielsen et al., each
+colour channel is one observation, so n training materials give 3n vectors; the basis is
+the top-k principal directions of those (mean removed), computed from their Gram matrix.
+A material is represented by 3·k coefficients (k per channel) plus the shared basis,
+mean and reference. `fit` projects a material by least squares on its valid cells, and
+evaluation looks up the reconstructed table (nearest cell, as the reference reader).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import Iterable
+
+import numpy as np
+import torch
+
+from brdfbench import merl
+from brdfbench.errors import ConfigError, DataError, ModelFileError
+from brdfbench.protocol import Material, Representation
+
+EPSILON = 1e-3
+DEFAULT_MAX_K = 300  # Nielsen et al. (2015) and seed 000 keep 300 components
+_CHUNK = 1 << 17
+
+
+@lru_cache(maxsize=1)
+def _domain() -> tuple[torch.Tensor, torch.Tensor]:
+    """Flat indices of the cells with both directions above the horizon, and their w = cosθi·cosθo."""
+    wi, wo = merl.grid_directions()
+    above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    cells = torch.nonzero(above).squeeze(1)
+    return cells, (wi[cells, 2] * wo[cells, 2])
+
+
+def _values_on_domain(material: Material) -> tuple[torch.Tensor, torch.Tensor]:
+    """(3, P) float64 values and (P,) validity of a material on the PCA domain."""
+    cells, _ = _domain()
+    values = torch.from_numpy(material.table.values.reshape(3, -1))[:, cells]
+    if not torch.isfinite(values).all():
+        raise DataError(f"material {material.name!r}: non-finite values")
+    valid = torch.from_numpy(material.table.valid.reshape(-1))[cells]
+    if not valid.any():
+        raise DataError(f"material {material.name!r}: every cell is invalid, nothing to fit")
+    return values, valid
+
+
+class PCA(Representation):
+    tags = frozenset({"isotropic", "reciprocal", "fittable", "tabulated", "needs_training"})
+    needs_training = True
+
+    def __init__(self, k: int | None = None):
+        if k is not None and (not isinstance(k, int) or k < 1):
+            raise ConfigError(f"pca: k must be a positive integer or null, got {k!r}")
+        super().__init__(k=k)
+        self.reference: torch.Tensor | None = None  # (3, P) float32
+        self.mean: torch.Tensor | None = None  # (P,) float32
+        self.basis: torch.Tensor | None = None  # (P, k) float32, orthonormal columns
+        self.coefficients: torch.Tensor | None = None  # (3, k) float64
+        self._table: merl.MerlTable | None = None
+
+    # -- shared state ---------------------------------------------------------
+    def _map(self, values: torch.Tensor) -> torch.Tensor:
+        _, w = _domain()
+        return torch.log((values * w + EPSILON) / (self.reference.double() * w + EPSILON))
+
+    def _unmap(self, mapped: torch.Tensor) -> torch.Tensor:
+        _, w = _domain()
+        return (((self.reference.double() * w + EPSILON) * torch.exp(mapped) - EPSILON) / w).clamp_min(0.0)
+
+    def train(self, materials: Iterable[Material], *, seed: int = 0) -> "PCA":
+        columns, valid_masks, names = [], [], []
+        for material in materials:
+            values, valid = _values_on_domain(material)
+            columns.append(values.float())
+            valid_masks.append(valid)
+            names.append(material.name)
+        if len(columns) < 2:
+            raise ConfigError(f"pca: needs at least 2 training materials, got {len(columns)}")
+        stacked = torch.stack(columns)  # (n, 3, P) float32
+        valid = torch.stack(valid_masks)  # (n, P)
+        # Reference: per-cell, per-channel median over the training materials' valid values.
+        masked = torch.where(valid[:, None, :], stacked, torch.full_like(stacked, float("nan")))
+        reference = torch.nanmedian(masked, dim=0).values
+        self.reference = torch.nan_to_num(reference, nan=0.0).clamp_min(0.0)
+        del masked
+        # Observations: one per (material, channel), mapped in place; invalid cells sit at the reference (x = 0).
+        for i in range(stacked.shape[0]):
+            stacked[i] = torch.where(valid[i], self._map(stacked[i].double()), 0.0).float()
+        x = stacked.reshape(-1, stacked.shape[-1])
+        self.mean = x.mean(dim=0)
+        x -= self.mean
+        rank = x.shape[0] - 1
+        k = self.params["k"]
+        if k is not None and k > rank:
+            raise ConfigError(
+                f"pca: k={k} is larger than the {rank} components that {len(names)} training materials "
+                f"({x.shape[0]} channel vectors, mean removed) can give; lower representation.params.k"
+            )
+        k = min(DEFAULT_MAX_K, rank) if k is None else k
+        # Gram matrix and basis in fp64, a block of cells at a time (x itself stays fp32).
+        chunks = [slice(i, i + _CHUNK) for i in range(0, x.shape[1], _CHUNK)]
+        gram = torch.zeros(x.shape[0], x.shape[0], dtype=torch.float64)
+        for c in chunks:
+            block = x[:, c].double()
+            gram += block @ block.T
+        eigvals, eigvecs = torch.linalg.eigh(gram)
+        order = torch.argsort(eigvals, descending=True)[:k]
+        scale = eigvecs[:, order] / eigvals[order].clamp_min(1e-30).sqrt()
+        self.basis = torch.empty(x.shape[1], k, dtype=torch.float32)  # (P, k), orthonormal columns
+        for c in chunks:
+            self.basis[c] = (x[:, c].double().T @ scale).float()
+        self.coefficients, self._table = None, None
+        return self
+
+    # -- per material ---------------------------------------------------------
+    def fit(self, target: Material, *, seed: int = 0) -> "PCA":
+        if self.basis is None:
+            raise RuntimeError("pca: train() on a split of materials before fit()")
+        values, valid = _values_on_domain(target)
+        centred = self._map(values) - self.mean.double()  # (3, P)
+        basis = self.basis.double()
+        rhs = centred[:, valid] @ basis[valid]  # (3, k)
+        invalid = ~valid
+        if invalid.any():  # least squares on the valid cells: B_v'B_v = I - B_inv'B_inv
+            b_inv = basis[invalid]
+            gram = torch.eye(basis.shape[1], dtype=torch.float64) - b_inv.T @ b_inv
+            # Symmetric positive definite while the valid cells determine the coefficients; a
+            # Cholesky solve is also deterministic, where LAPACK's threaded lstsq is not.
+            factor, info = torch.linalg.cholesky_ex(gram)
+            if info:
+                raise DataError(f"material {target.name!r}: too few valid cells to determine {basis.shape[1]} PCA coefficients")
+            self.coefficients = torch.cholesky_solve(rhs.T, factor).T
+        else:
+            self.coefficients = rhs
+        self._table = None
+        return self
+
+    @property
+    def table(self) -> merl.MerlTable:
+        """The reconstructed MERL table (built once per fit)."""
+        if self._table is None:
+            if self.coefficients is None:
+                raise RuntimeError("pca: evaluate after fit() or load")
+            cells, _ = _domain()
+            mapped = self.mean.double() + self.coefficients @ self.basis.double().T  # (3, P)
+            values = np.full((3, merl.N_CELLS), merl.INVALID_RAW, dtype=np.float64)
+            values[:, cells.numpy()] = self._unmap(mapped).numpy()
+            valid = np.zeros(merl.N_CELLS, dtype=bool)
+            valid[cells.numpy()] = True
+            self._table = merl.MerlTable.from_values(values.reshape(3, *merl.SHAPE), valid.reshape(merl.SHAPE))
+        return self._table
+
+    def _eval(self, wi, wo):
+        return self.table.lookup(wi, wo, "nearest").clamp_min(0.0)
+
+    # -- persistence and cost -------------------------------------------------
+    def state_dict(self):
+        state = {}
+        for name in ("reference", "mean", "basis", "coefficients"):
+            value = getattr(self, name)
+            if value is not None:
+                state[name] = value
+        return state
+
+    @classmethod
+    def from_state(cls, params, tensors, metadata):
+        model = cls(**params)
+        cells, _ = _domain()
+        p = cells.numel()
+        expected = {"reference": (3, p), "mean": (p,)}
+        for name, shape in expected.items():
+            if name in tensors and tuple(tensors[name].shape) != shape:
+                raise ModelFileError(f"pca model: tensor {name!r} has shape {tuple(tensors[name].shape)}, expected {shape}")
+        if "basis" in tensors:
+            basis = tensors["basis"]
+            if basis.ndim != 2 or basis.shape[0] != p:
+                raise ModelFileError(
+                    f"pca model: basis has shape {tuple(basis.shape)}, which does not match the MERL table's "
+                    f"{p} cells above the horizon"
+                )
+            if "coefficients" in tensors and tuple(tensors["coefficients"].shape) != (3, basis.shape[1]):
+                raise ModelFileError(
+                    f"pca model: coefficients have shape {tuple(tensors['coefficients'].shape)}, expected (3, {basis.shape[1]})"
+                )
+        model.reference = tensors.get("reference")
+        model.mean = tensors.get("mean")
+        model.basis = tensors.get("basis")
+        model.coefficients = tensors.get("coefficients")
+        return model
+
+    @property
+    def nbytes(self) -> int:
+        c = self.coefficients
+        return 0 if c is None else c.numel() * c.element_size()
+
+    @property
+    def shared_nbytes(self) -> int:
+        return sum(t.numel() * t.element_size() for t in (self.reference, self.mean, self.basis) if t is not None)
+
+    @property
+    def flops_per_eval(self) -> int | None:
+        return None  # a table lookup once reconstructed
