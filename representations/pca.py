@@ -51,6 +51,23 @@ def _values_on_domain(material: Material) -> tuple[torch.Tensor, torch.Tensor]:
     return values, valid
 
 
+def _chunked_project(centred: torch.Tensor, basis: torch.Tensor) -> torch.Tensor:
+    """centred (3, P) fp64 @ basis (P, k) fp32, block by block in fp32, summed in fp64.
+
+    Avoids an fp64 copy of the basis (P·k·8 bytes: 2 GB at k = 224).
+    """
+    out = torch.zeros(centred.shape[0], basis.shape[1], dtype=torch.float64)
+    for i in range(0, basis.shape[0], _CHUNK):
+        out += (centred[:, i : i + _CHUNK].float() @ basis[i : i + _CHUNK]).double()
+    return out
+
+
+def _chunked_reconstruct(coefficients: torch.Tensor, basis: torch.Tensor) -> torch.Tensor:
+    """coefficients (3, k) @ basis.T, block by block of cells, in fp32; returns fp64 (3, P)."""
+    c = coefficients.float()
+    return torch.cat([c @ basis[i : i + _CHUNK].T for i in range(0, basis.shape[0], _CHUNK)], dim=1).double()
+
+
 class PCA(Representation):
     tags = frozenset({"isotropic", "reciprocal", "fittable", "tabulated", "needs_training"})
     needs_training = True
@@ -124,22 +141,22 @@ class PCA(Representation):
         if self.basis is None:
             raise RuntimeError("pca: train() on a split of materials before fit()")
         values, valid = _values_on_domain(target)
-        centred = self._map(values) - self.mean.double()  # (3, P)
-        basis = self.basis.double()
-        rhs = centred[:, valid] @ basis[valid]  # (3, k)
+        centred = torch.where(valid, self._map(values) - self.mean.double(), 0.0)  # (3, P); invalid cells drop out
+        rhs = _chunked_project(centred, self.basis)  # (3, k) = centred @ basis over valid cells
         invalid = ~valid
         if invalid.any():  # least squares on the valid cells: B_v'B_v = I - B_inv'B_inv
-            b_inv = basis[invalid]
-            gram = torch.eye(basis.shape[1], dtype=torch.float64) - b_inv.T @ b_inv
+            b_inv = self.basis[invalid].double()
+            gram = torch.eye(self.basis.shape[1], dtype=torch.float64) - b_inv.T @ b_inv
             # Symmetric positive definite while the valid cells determine the coefficients; a
             # Cholesky solve is also deterministic, where LAPACK's threaded lstsq is not.
             factor, info = torch.linalg.cholesky_ex(gram)
             if info:
-                raise DataError(f"material {target.name!r}: too few valid cells to determine {basis.shape[1]} PCA coefficients")
+                raise DataError(f"material {target.name!r}: too few valid cells to determine {self.basis.shape[1]} PCA coefficients")
             self.coefficients = torch.cholesky_solve(rhs.T, factor).T
         else:
             self.coefficients = rhs
         self._table = None
+        _ = self.table  # reconstruct now, so fit time covers all the work evaluation depends on
         return self
 
     @property
@@ -149,7 +166,7 @@ class PCA(Representation):
             if self.coefficients is None:
                 raise RuntimeError("pca: evaluate after fit() or load")
             cells, _ = _domain()
-            mapped = self.mean.double() + self.coefficients @ self.basis.double().T  # (3, P)
+            mapped = self.mean.double() + _chunked_reconstruct(self.coefficients, self.basis)  # (3, P)
             values = np.full((3, merl.N_CELLS), merl.INVALID_RAW, dtype=np.float64)
             values[:, cells.numpy()] = self._unmap(mapped).numpy()
             valid = np.zeros(merl.N_CELLS, dtype=bool)

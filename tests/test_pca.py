@@ -54,7 +54,10 @@ def test_projection_is_least_squares_on_valid_cells(trained):
     assert (~valid).any(), "the reference material should have invalid cells for this test"
     centred = model._map(values) - model.mean.double()
     reference = torch.linalg.lstsq(model.basis.double()[valid], centred[:, valid].T).solution.T
-    assert torch.allclose(model.coefficients, reference, rtol=1e-8, atol=1e-10)
+    # The projection multiplies fp32 blocks (the basis is stored in fp32), summed in fp64:
+    # accurate relative to the coefficient vector, per channel.
+    error = torch.linalg.vector_norm(model.coefficients - reference, dim=1)
+    assert (error <= 1e-5 * torch.linalg.vector_norm(reference, dim=1)).all(), error
 
 
 def test_all_invalid_and_nan_targets_are_clear_errors(trained):
