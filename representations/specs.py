@@ -20,3 +20,21 @@ PCA = RepresentationSpec(
     target="brdfbench_representations.pca:PCA",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "tabulated", "needs_training"}),
 )
+COOK_TORRANCE = RepresentationSpec(
+    name="cook_torrance",
+    description="Cook-Torrance as seed 000: kd/pi + ks GGX(roughness^2) Schlick-GGX G (k = alpha^2/2) Schlick F(IoR); L1-log-cos fit",
+    target="brdfbench_representations.analytic:CookTorrance",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+)
+GGX = RepresentationSpec(
+    name="ggx",
+    description="Isotropic GGX microfacet: kd/pi + ks D(alpha) height-correlated Smith G2 Schlick F(F0); L1-log-cos fit",
+    target="brdfbench_representations.analytic:GGX",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+)
+BLINN_PHONG = RepresentationSpec(
+    name="blinn_phong",
+    description="Normalised Blinn-Phong: kd/pi + ks (n+8)/(8 pi) cos^n theta_h, exponent fitted in log space; L1-log-cos fit",
+    target="brdfbench_representations.analytic:BlinnPhong",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+)

@@ -1,0 +1,344 @@
+"""Analytic BRDF baselines: Cook-Torrance (seed 000), GGX with height-correlated Smith,
+and normalised Blinn-Phong. Each is f = k_d/π + k_s ⊙ lobe(ωi, ωo), RGB k_d and k_s.
+
+These are the baselines every neural model is measured against, so they are evaluated in
+forms that stay accurate and finite in fp32 as well as fp64, for any pair both above the
+horizon, down to GGX α = 1e-3 (Cook-Torrance roughness 1e-3, α = 1e-6) and Blinn-Phong
+exponents up to 1e6:
+
+- The half vector comes from `brdfbench.coords.half_vector` (stable for ωi + ωo ≈ 0);
+  sin²θh = h_x² + h_y² is taken from its components, never as 1 − cos²θh, which cancels
+  in fp32 exactly where a narrow lobe lives.
+- GGX D = α² / (π (α² h_z² + h_x² + h_y²)²): no ((α² − 1) cos²θh + 1) cancellation and
+  no tangent (infinite at grazing h).
+- Height-correlated Smith: G2 / (4 cosθi cosθo) =
+  0.5 / (cosθo √(cos²θi + α² sin²θi) + cosθi √(cos²θo + α² sin²θo)), no division by a
+  vanishing cosine; Schlick-GGX: G / (4 cos cos) = 1 / (4 (cosθi (1−k) + k)(cosθo (1−k) + k)).
+- cos^n θh = exp(n/2 · log1p(−sin²θh)): no overflow, no pow(0, 0), and accurate for huge n
+  (log(cosθh) in fp32 has an absolute error of ~6e-8, i.e. 6 % at n = 1e6; log1p(−sin²θh)
+  is relatively accurate).
+- cosθd = |ωi + ωo| / 2 (exactly symmetric in ωi, ωo, so reciprocity holds bitwise).
+- Cosines are clamped to ≥ COS_MIN = 1e-7 (directions within 1e-7 rad of the horizon
+  only), which bounds the 1/(cosθi cosθo) of Cook-Torrance's nearly shadowing-free G;
+  α is floored at ALPHA_MIN = 1e-6. Outputs are clamped to [0, finfo.max].
+
+Everything is written once, in torch, and used both by `_eval` (in the input dtype) and by
+the fit (float64 with autograd): see `representations/fitting.py`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar, NamedTuple
+
+import torch
+
+from brdfbench.coords import half_vector
+from brdfbench.errors import ConfigError
+from brdfbench.protocol import Material, Representation
+
+Tensor = torch.Tensor
+
+TAGS = frozenset({"isotropic", "reciprocal", "fittable", "analytic"})
+COS_MIN = 1e-7
+ALPHA_MIN = 1e-6
+INV_PI = 1.0 / math.pi
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+class Geometry(NamedTuple):
+    """Per-pair quantities every lobe needs (all (N,), in the input dtype)."""
+
+    cos_i: Tensor  # ωi_z, clamped to [COS_MIN, 1]
+    cos_o: Tensor
+    sin2_i: Tensor  # ωi_x² + ωi_y², in [0, 1]
+    sin2_o: Tensor
+    cos2_h: Tensor  # h_z² (h_z clamped ≥ 0)
+    sin2_h: Tensor  # h_x² + h_y², in [0, 1]
+    cos_d: Tensor  # ωi·h = |ωi + ωo| / 2, in [0, 1]
+
+
+def geometry(wi: Tensor, wo: Tensor) -> Geometry:
+    """Geometry of pairs both above the horizon (the protocol masks the others)."""
+    h = half_vector(wi, wo)
+    hz = h[:, 2].clamp(min=0.0)
+    sin2_h = (h[:, 0] * h[:, 0] + h[:, 1] * h[:, 1]).clamp(0.0, 1.0)
+    cos_d = (0.5 * torch.linalg.vector_norm(wi + wo, dim=-1)).clamp(0.0, 1.0)
+    return Geometry(
+        cos_i=wi[:, 2].clamp(COS_MIN, 1.0),
+        cos_o=wo[:, 2].clamp(COS_MIN, 1.0),
+        sin2_i=(wi[:, 0] * wi[:, 0] + wi[:, 1] * wi[:, 1]).clamp(0.0, 1.0),
+        sin2_o=(wo[:, 0] * wo[:, 0] + wo[:, 1] * wo[:, 1]).clamp(0.0, 1.0),
+        cos2_h=hz * hz,
+        sin2_h=sin2_h,
+        cos_d=cos_d,
+    )
+
+
+# --------------------------------------------------------------------------- terms
+
+
+def ggx_ndf(alpha: Tensor, g: Geometry) -> Tensor:
+    """GGX / Trowbridge-Reitz D(h) = α² / (π (α² cos²θh + sin²θh)²), normalised so that
+    ∫ D cosθh dωh = 1."""
+    a2 = alpha * alpha
+    q = a2 * g.cos2_h + g.sin2_h
+    return a2 / (math.pi * q * q)
+
+
+def smith_g2_over_4cc(alpha: Tensor, g: Geometry) -> Tensor:
+    """Height-correlated Smith G2 of GGX divided by 4 cosθi cosθo (Heitz 2014, eq. 99)."""
+    a2 = alpha * alpha
+    ai = torch.sqrt(g.cos_i * g.cos_i + a2 * g.sin2_i)
+    ao = torch.sqrt(g.cos_o * g.cos_o + a2 * g.sin2_o)
+    return 0.5 / (g.cos_o * ai + g.cos_i * ao)
+
+
+def schlick_g_over_4cc(k: Tensor, g: Geometry) -> Tensor:
+    """Separable Schlick-GGX G1(ωi) G1(ωo) / (4 cosθi cosθo), G1(v) = n·v / (n·v (1−k) + k)."""
+    return 0.25 / ((g.cos_i * (1.0 - k) + k) * (g.cos_o * (1.0 - k) + k))
+
+
+def schlick_fresnel(f0: Tensor, cos_d: Tensor) -> Tensor:
+    """Schlick's F = F0 + (1 − F0)(1 − cosθd)^5."""
+    m = 1.0 - cos_d
+    m2 = m * m
+    return f0 + (1.0 - f0) * (m2 * m2 * m)
+
+
+def blinn_phong_lobe(n: Tensor, g: Geometry) -> Tensor:
+    """(n + 8)/(8π) cos^n θh, as exp(n/2 · log1p(−sin²θh)); 0 where h_z = 0."""
+    eps = torch.finfo(g.sin2_h.dtype).eps
+    log_cos = 0.5 * torch.log1p(-g.sin2_h.clamp(max=1.0 - eps))
+    lobe = (n + 8.0) / (8.0 * math.pi) * torch.exp(n * log_cos)
+    return torch.where(g.cos2_h > 0, lobe, torch.zeros_like(lobe))
+
+
+def ior_to_f0(ior: Tensor) -> Tensor:
+    r = (ior - 1.0) / (ior + 1.0)
+    return r * r
+
+
+# --------------------------------------------------------------------------- the models
+
+
+@dataclass(frozen=True)
+class Coefficient:
+    """One fitted coefficient: its size, default, fit bounds, and whether it is fitted in log space."""
+
+    name: str
+    size: int
+    default: float
+    lower: float
+    upper: float
+    log: bool = False
+
+
+_KD = Coefficient("kd", 3, 0.5, 0.0, 2.0)
+_KS = Coefficient("ks", 3, 1.0, 1e-8, 1e3, log=True)
+
+
+def _check_int(model: str, name: str, value: Any, lo: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+        raise ConfigError(f"{model}: {name} must be an integer >= {lo}, got {value!r}")
+    return value
+
+
+class AnalyticBRDF(Representation):
+    """f = k_d/π + k_s ⊙ lobe; subclasses define COEFFS (after kd, ks), `lobe` and `init_shape`.
+
+    Constructor params only steer the fit: `n_samples` valid MERL cells drawn (seeded) to
+    fit on, and `restarts` roughness initialisations (at most 8 distinct ones; the best
+    fit is kept). The fitted coefficients live in `coeffs` (float64 tensors, also readable
+    as attributes: `model.kd`, `model.alpha`, ...); after a fit `fit_loss` is the true
+    L1-log-cos on the fit subsample and `fit_info` the rest of `metadata()`.
+    """
+
+    tags: ClassVar[frozenset[str]] = TAGS
+    NAME: ClassVar[str] = "analytic"
+    COEFFS: ClassVar[tuple[Coefficient, ...]] = (_KD, _KS)
+    FLOPS: ClassVar[int] = 0
+
+    def __init__(self, n_samples: int = 32768, restarts: int = 4):
+        _check_int(self.NAME, "n_samples", n_samples, 16)
+        _check_int(self.NAME, "restarts", restarts, 1)
+        super().__init__(n_samples=n_samples, restarts=restarts)
+        self.n_samples = n_samples
+        self.restarts = restarts
+        self.coeffs: dict[str, Tensor] = {c.name: torch.full((c.size,), c.default, dtype=torch.float64) for c in self.COEFFS}
+        self.fit_loss: float | None = None
+        self.fit_info: dict[str, Any] = {}
+
+    # -- coefficients ----------------------------------------------------------------
+    def set_coefficients(self, **values: Any) -> "AnalyticBRDF":
+        """Set coefficients by name (scalars broadcast to RGB where the size is 3); returns self."""
+        sizes = {c.name: c.size for c in self.COEFFS}
+        for name, value in values.items():
+            if name not in sizes:
+                raise ConfigError(f"{self.NAME}: unknown coefficient {name!r}; expected one of {', '.join(sizes)}")
+            t = torch.as_tensor(value, dtype=torch.float64).reshape(-1)
+            if t.numel() == 1:
+                t = t.expand(sizes[name])
+            if t.numel() != sizes[name] or not bool(torch.isfinite(t).all()):
+                raise ConfigError(f"{self.NAME}: coefficient {name!r} needs {sizes[name]} finite value(s), got {value!r}")
+            self.coeffs[name] = t.clone()
+        return self
+
+    def __getattr__(self, name: str) -> Tensor:
+        coeffs = self.__dict__.get("coeffs")
+        if coeffs is not None and name in coeffs:
+            return coeffs[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    # -- the model -------------------------------------------------------------------
+    @classmethod
+    def lobe(cls, g: Geometry, c: dict[str, Tensor]) -> Tensor:
+        """Scalar specular lobe (N,) for k_s = 1; `c` holds the shape coefficients as 0-d tensors."""
+        raise NotImplementedError
+
+    @classmethod
+    def init_shape(cls, alpha: float) -> dict[str, float]:
+        """Shape coefficients for an initial GGX-equivalent roughness α (Fresnel at its default)."""
+        raise NotImplementedError
+
+    @classmethod
+    def combine(cls, kd: Tensor, ks: Tensor, lobe: Tensor) -> Tensor:
+        return kd * INV_PI + lobe[:, None] * ks
+
+    def _eval(self, wi: Tensor, wo: Tensor) -> Tensor:
+        dtype = wi.dtype
+        c = {k: v.to(dtype) for k, v in self.coeffs.items()}
+        shape = {k: v[0] for k, v in c.items() if k not in ("kd", "ks")}
+        out = self.combine(c["kd"], c["ks"], self.lobe(geometry(wi, wo), shape))
+        return out.clamp(0.0, torch.finfo(dtype).max)
+
+    def fit(self, target: Material, *, seed: int = 0) -> "AnalyticBRDF":
+        from .fitting import fit_analytic
+
+        result = fit_analytic(self, target, seed=seed)
+        self.set_coefficients(**result.coefficients)
+        self.fit_loss = result.loss
+        self.fit_info = result.info
+        return self
+
+    # -- persistence and cost --------------------------------------------------------
+    def state_dict(self) -> dict[str, Tensor]:
+        return {k: v.clone() for k, v in self.coeffs.items()}
+
+    def metadata(self) -> dict[str, Any]:
+        if self.fit_loss is None:
+            return {}
+        return {"fit_loss": self.fit_loss, **self.fit_info}
+
+    @classmethod
+    def from_state(cls, params, tensors, metadata):
+        model = cls(**params)
+        for c in cls.COEFFS:
+            model.coeffs[c.name] = tensors[c.name].double().reshape(c.size).clone()
+        if metadata.get("fit_loss") is not None:
+            model.fit_loss = float(metadata["fit_loss"])
+            model.fit_info = {k: v for k, v in metadata.items() if k != "fit_loss"}
+        return model
+
+    @property
+    def flops_per_eval(self) -> int:
+        return self.FLOPS
+
+
+# Counting each add, multiply, divide, sqrt, exp or log as one operation, with per-model
+# constants (α², F0, k, (n+8)/(8π), k_d/π) hoisted: half vector h = (ωi+ωo)/|ωi+ωo| 12,
+# cosθd from the same norm 1, h_z² and sin²θh 4; the RGB combine k_d/π + k_s·lobe 6.
+_COMMON_FLOPS = 12 + 1 + 4 + 6
+
+
+class CookTorrance(AnalyticBRDF):
+    """Cook-Torrance as in seed 000 (Hu, Cambridge TR, §3.1.1, eqs. 3.1-3.4).
+
+    f = k_d/π + k_s · D·G·F / (4 cosθi cosθo) with
+    D = GGX / Trowbridge-Reitz with α = roughness²;
+    F = Schlick with F0 = ((IoR − 1)/(IoR + 1))²;
+    G = G1(ωi) G1(ωo), separable Schlick-GGX G1(v) = n·v / ((n·v)(1 − k) + k) with
+    k = α²/2 exactly as the seed writes it (its "k_IBL"; note this is roughness⁴/2, much
+    smaller than the usual UE4 k = α/2, so G is close to 1 except at grazing).
+
+    The seed's diffuse term (n·v)/π is a known slip: Lambert is k_d/π (DESIGN.md).
+    Coefficients: kd (RGB), ks (RGB), roughness, ior.
+    """
+
+    NAME = "cook_torrance"
+    COEFFS = (
+        _KD,
+        _KS,
+        Coefficient("roughness", 1, 0.5, math.sqrt(1e-3), 1.0, log=True),
+        Coefficient("ior", 1, 1.5, 1.05, 50.0, log=True),
+    )
+    # D 5 + Schlick-GGX G/(4cc) 6 + Fresnel 6 + D·G·F 2
+    FLOPS = _COMMON_FLOPS + 5 + 6 + 6 + 2
+
+    @classmethod
+    def lobe(cls, g, c):
+        alpha = (c["roughness"] * c["roughness"]).clamp(min=ALPHA_MIN)
+        k = 0.5 * alpha * alpha
+        return ggx_ndf(alpha, g) * schlick_g_over_4cc(k, g) * schlick_fresnel(ior_to_f0(c["ior"]), g.cos_d)
+
+    @classmethod
+    def init_shape(cls, alpha):
+        return {"roughness": math.sqrt(alpha), "ior": 1.5}
+
+
+class GGX(AnalyticBRDF):
+    """Isotropic GGX microfacet model with height-correlated Smith shadowing-masking.
+
+    f = k_d/π + k_s · D_GGX(α) · G2 · F_Schlick(F0) / (4 cosθi cosθo), G2 = 1/(1 + Λ(ωi) + Λ(ωo)),
+    Λ = (√(1 + α² tan²θ) − 1)/2 (Heitz 2014). Coefficients: kd (RGB), ks (RGB), alpha, f0.
+    """
+
+    NAME = "ggx"
+    COEFFS = (
+        _KD,
+        _KS,
+        Coefficient("alpha", 1, 0.3, 1e-3, 1.0, log=True),
+        Coefficient("f0", 1, 0.04, 1e-3, 1.0),
+    )
+    # D 5 + height-correlated Smith G2/(4cc) 14 + Fresnel 6 + D·G·F 2
+    FLOPS = _COMMON_FLOPS + 5 + 14 + 6 + 2
+
+    @classmethod
+    def lobe(cls, g, c):
+        alpha = c["alpha"].clamp(min=ALPHA_MIN)
+        return ggx_ndf(alpha, g) * smith_g2_over_4cc(alpha, g) * schlick_fresnel(c["f0"], g.cos_d)
+
+    @classmethod
+    def init_shape(cls, alpha):
+        return {"alpha": alpha, "f0": 0.04}
+
+
+class BlinnPhong(AnalyticBRDF):
+    """Normalised Blinn-Phong: f = k_d/π + k_s (n + 8)/(8π) cos^n θh.
+
+    (n + 8)/(8π) is the usual energy normalisation (Akenine-Möller et al., Real-Time
+    Rendering): at normal incidence the albedo of the lobe is n(n + 8)/((n + 2)(n + 4)),
+    within 7 % of 1 for every n and → 1 as n grows. The exponent is fitted as log n.
+    Coefficients: kd (RGB), ks (RGB), exponent.
+    """
+
+    NAME = "blinn_phong"
+    COEFFS = (
+        _KD,
+        _KS,
+        Coefficient("exponent", 1, 50.0, 0.1, 1e6, log=True),
+    )
+    # log1p 1 + n/2·log 2 + exp 1 + (n+8)/(8π)· 1 + horizon select 1
+    FLOPS = _COMMON_FLOPS + 6
+
+    @classmethod
+    def lobe(cls, g, c):
+        return blinn_phong_lobe(c["exponent"].clamp(min=0.0), g)
+
+    @classmethod
+    def init_shape(cls, alpha):
+        # Beckmann-equivalent exponent n = 2/α² − 2 (Walter et al. 2007).
+        return {"exponent": 2.0 / (alpha * alpha) - 2.0}
