@@ -22,6 +22,15 @@ from brdfbench.protocol import Material, Representation
 MODES = ("nearest", "trilinear")
 DENSITIES = (1, 2, 4, 8, 16, 24, 32)
 
+# Arithmetic per lookup, counted as analytic.py counts (each add, multiply, divide, sqrt,
+# trig function one operation; memory gathers not counted): half vector 12, ωi rotated into
+# the half-vector frame 18, θh, θd, φd 6, fold and three cell indices 9.
+NEAREST_FLOPS = 12 + 18 + 6 + 9
+# Trilinear adds, per axis, the fractional offset and two weights (3 × 3), and for each of
+# the 8 corners a weight product, validity weight and RGB multiply-add (8 × 10), then the
+# normalisation (4).
+TRILINEAR_FLOPS = NEAREST_FLOPS + 9 + 80 + 4
+
 
 def block_samples(raw: np.ndarray, x: int) -> np.ndarray:
     """One sample per x×x×x block of a (3, 90, 90, 180) table: (3, ⌈90/x⌉, ⌈90/x⌉, ⌈180/x⌉).
@@ -76,6 +85,12 @@ class TabulatedMERL(Representation):
         raw = torch.from_numpy(self.samples)[:, ih // x, id_ // x, ip // x].T
         scales = torch.tensor(merl.CHANNEL_SCALES, dtype=torch.float64)
         return (raw * scales).clamp_min(0.0)
+
+    @property
+    def flops_per_eval(self) -> int:
+        if self.mode == "trilinear":
+            return TRILINEAR_FLOPS
+        return NEAREST_FLOPS + (3 if self.downsample > 1 else 0)  # three block divisions
 
     def state_dict(self):
         if self.downsample > 1:

@@ -25,6 +25,8 @@ from brdfbench import merl
 from brdfbench.errors import ConfigError, DataError, ModelFileError
 from brdfbench.protocol import Material, Representation
 
+from .merl import NEAREST_FLOPS
+
 EPSILON = 1e-3
 DEFAULT_MAX_K = 300  # Nielsen et al. (2015) and seed 000 keep 300 components
 _CHUNK = 1 << 17
@@ -222,5 +224,5 @@ class PCA(Representation):
         return sum(t.numel() * t.element_size() for t in (self.reference, self.mean, self.basis) if t is not None)
 
     @property
-    def flops_per_eval(self) -> int | None:
-        return None  # a table lookup once reconstructed
+    def flops_per_eval(self) -> int:
+        return NEAREST_FLOPS  # a nearest-cell lookup of the table reconstructed at fit time
