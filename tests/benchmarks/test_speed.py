@@ -11,7 +11,7 @@ import torch
 
 from brdfbench import coords, merl
 from brdfbench.harness import directions
-from brdfbench.testing.kit import reference_material
+from brdfbench.testing.kit import reference_material, training_materials
 
 N = 2**16
 
@@ -31,12 +31,33 @@ def test_merl_lookup(benchmark, pairs, mode):
     benchmark(table.lookup, *pairs, mode)
 
 
-@pytest.mark.parametrize("name", ["merl", "lambert"])
-def test_representation_eval(benchmark, pairs, name):
+def _fitted(name, **params):
     from brdfbench import registry
 
-    model = registry.get("representations", name).create().fit(reference_material())
-    benchmark(model.eval, *pairs)
+    model = registry.get("representations", name).create(**params)
+    if model.needs_training:
+        model.train(training_materials())
+    return model.fit(reference_material())
+
+
+@pytest.mark.parametrize("name", ["merl", "lambert", "cook_torrance", "ggx", "blinn_phong", "pca"])
+def test_representation_eval(benchmark, pairs, name):
+    benchmark(_fitted(name).eval, *pairs)
+
+
+@pytest.mark.parametrize("name", ["cook_torrance", "ggx", "blinn_phong"])
+def test_analytic_fit(benchmark, name):
+    from brdfbench import registry
+
+    spec = registry.get("representations", name)
+    target = reference_material()
+    benchmark.pedantic(lambda: spec.create().fit(target), rounds=3, iterations=1, warmup_rounds=1)
+
+
+def test_pca_projection(benchmark):
+    model = _fitted("pca")
+    target = reference_material()
+    benchmark.pedantic(model.fit, args=(target,), rounds=3, iterations=1)
 
 
 def test_grid_directions_uncached(benchmark):
