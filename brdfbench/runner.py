@@ -178,8 +178,13 @@ def plan_folds(materials: tuple[str, ...], needs_training: bool, folds: int, see
     """
     if not needs_training:
         return [(None, list(materials))]
-    if not 2 <= folds <= len(materials):
-        raise ConfigError(f"harness.folds={folds}: cross-validation needs 2 <= folds <= {len(materials)} (the number of materials)")
+    if folds < 2 or len(materials) < 2:
+        raise ConfigError(
+            f"harness.folds={folds} over {len(materials)} materials: cross-validation needs at least 2 folds and 2 materials"
+        )
+    if folds > len(materials):
+        log.warning("harness.folds=%d exceeds the %d materials: using %d folds (leave-one-out)", folds, len(materials), len(materials))
+        folds = len(materials)
     order = torch.randperm(len(materials), generator=torch.Generator().manual_seed(seed)).tolist()
     groups = [sorted(materials[i] for i in order[f::folds]) for f in range(folds)]
     return [([m for g in groups if g is not group for m in g], group) for group in groups]

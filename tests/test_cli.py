@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-QUICK = ["dataset.params.size=small", "harness=quick", "limit=2"]
+QUICK = ["dataset.params.size=small", "harness=quick", "limit=3"]
 
 
 def brdfbench(*args, cwd, env_extra=None):
@@ -25,10 +25,10 @@ def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path):
     board = (tmp_path / "res" / "leaderboard.md").read_text()
     assert "`merl`" in board and "`lambert`" in board
     assert "fit time (s)" in board and "evals/s" in board and "bytes" in board
-    assert "2 done" in out.stdout
+    assert "3 done" in out.stdout
     again = brdfbench(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert again.returncode == 0, again.stderr
-    assert "0 done, 2 already in the store" in again.stdout
+    assert "0 done, 3 already in the store" in again.stdout
 
 
 def test_explicit_multirun_sweep(tmp_path):

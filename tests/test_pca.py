@@ -102,3 +102,7 @@ def test_cross_validation_fits_each_material_once_never_on_its_training_data():
     assert plan_folds(materials, False, 4, seed=3) == [(None, list(materials))]
     with pytest.raises(ConfigError, match="harness.folds=1"):
         plan_folds(materials, True, 1, seed=0)
+    with pytest.raises(ConfigError, match="2 materials"):
+        plan_folds(("only",), True, 4, seed=0)
+    leave_one_out = plan_folds(materials[:3], True, 4, seed=0)
+    assert sorted(len(fit) for _, fit in leave_one_out) == [1, 1, 1]
