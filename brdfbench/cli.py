@@ -63,7 +63,10 @@ def cmd_inspect(args) -> int:
 
     name, model = modelio.load(args.path)
     print(f"{args.path}: representation {name!r}, params {model.params}, {model.nbytes} bytes"
+          + (f" (+{model.shared_nbytes} shared)" if model.shared_nbytes else "")
           + (f", {model.flops_per_eval} FLOP/eval" if model.flops_per_eval else ""))
+    for key, value in model.metadata().items():
+        print(f"  {key}: {value}")
     return 0
 
 

@@ -31,6 +31,9 @@ class Material:
     source: str = ""
 
 
+FIT_LOSS_KEY = "fit_loss"
+
+
 class Representation(ABC):
     """Base class for BRDF representations.
 
@@ -85,7 +88,11 @@ class Representation(ABC):
         """Every tensor needed to rebuild the fitted model."""
 
     def metadata(self) -> dict[str, Any]:
-        """JSON-able extras saved beside the tensors (params are saved separately)."""
+        """JSON-able extras saved beside the tensors (params are saved separately).
+
+        A number under FIT_LOSS_KEY is the final value of the model's own fitting objective;
+        the runner records it as the metric `fit_loss`.
+        """
         return {}
 
     @classmethod

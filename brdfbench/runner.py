@@ -24,6 +24,7 @@ from .errors import BrdfbenchError, ConfigError
 from .harness import Measurement
 from .harness.accuracy import evaluate_accuracy
 from .harness.cost import evaluation_throughput, model_size
+from .protocol import FIT_LOSS_KEY
 from .provenance import config_hash, git_sha
 from .store import ResultsStore, Row, now
 from .timeouts import time_limit
@@ -148,6 +149,9 @@ def run(cfg: RunConfig) -> dict[str, int]:
                         model, material, metric_specs, n_random=cfg.harness.n_random, seed=cfg.seed, dtype=dtype,
                     )
                     measurements.append(Measurement("fit_time", fit_s, "s", False))
+                    fit_loss = model.metadata().get(FIT_LOSS_KEY)
+                    if isinstance(fit_loss, (int, float)):
+                        measurements.append(Measurement("fit_loss", float(fit_loss), "objective", False))
                     measurements.extend(extra)
                     measurements.append(evaluation_throughput(model, batch=cfg.harness.throughput_batch, seed=cfg.seed, dtype=dtype))
                     measurements.extend(model_size(model))

@@ -112,3 +112,15 @@ def test_report_without_store_is_an_error(tmp_path):
 def test_default_benchmark_full_size(tmp_path):
     out = brdfbench(f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
+
+
+def test_inspect_shows_params_and_fit_metadata(tmp_path):
+    from brdfbench import modelio, registry
+    from brdfbench.testing.kit import reference_material
+
+    model = registry.get("representations", "ggx").create().fit(reference_material())
+    path = modelio.save(model, "ggx", tmp_path / "ggx.safetensors")
+    out = brdfbench("inspect", str(path), cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "representation 'ggx'" in out.stdout and "FLOP/eval" in out.stdout
+    assert f"fit_loss: {model.fit_loss}" in out.stdout

@@ -135,3 +135,10 @@ def test_k_too_large_stops_the_run_with_a_clear_error(tmp_path, synthetic_cache)
     cfg = RunConfig(**{**cfg.__dict__, "representation_params": {"k": 300}})
     with pytest.raises(ConfigError, match="k=300 is larger than"):
         run(cfg)
+
+
+def test_a_models_own_fit_loss_is_recorded(tmp_path, synthetic_cache):
+    run(_cfg(tmp_path, synthetic_cache, "ggx", limit=1))
+    df = ResultsStore(tmp_path / "brdfbench.sqlite").frame()
+    loss = df[df.metric == "fit_loss"]
+    assert len(loss) == 1 and loss.unit.iloc[0] == "objective" and 0 < loss.value.iloc[0] < 1
