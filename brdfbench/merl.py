@@ -242,3 +242,12 @@ def grid_directions(dtype=torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
     g = grid_angles(torch.float64)
     wi, wo = coords.from_half_diff(g.theta_h, g.phi_h, g.theta_d, g.phi_d)
     return wi.to(dtype), wo.to(dtype)
+
+
+@lru_cache(maxsize=1)
+def grid_above_horizon() -> torch.Tensor:
+    """(N_CELLS,) bool mask of the cell centres whose two directions are above the horizon.
+
+    Cached, like `grid_directions`: never modify it in place.
+    """
+    return coords.above_horizon(*grid_directions(torch.float64))

@@ -33,7 +33,6 @@ import math
 import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from functools import lru_cache
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -90,13 +89,6 @@ class FitResult:
     info: dict[str, Any] = field(default_factory=dict)
 
 
-@lru_cache(maxsize=1)
-def _grid_above() -> np.ndarray:
-    """(N_CELLS,) mask of MERL cells whose centre pair is above the horizon."""
-    wi, wo = merl.grid_directions(torch.float64)
-    return ((wi[:, 2] > 0) & (wo[:, 2] > 0)).numpy()
-
-
 def _usable_cells(target: Material, model_name: str) -> np.ndarray:
     raw = target.table.raw
     bad = ~np.isfinite(raw)
@@ -106,7 +98,7 @@ def _usable_cells(target: Material, model_name: str) -> np.ndarray:
             f"{target.name}: {int(bad.sum())} non-finite (NaN/Inf) values in the MERL table "
             f"(first at channel {c}, index ({i}, {j}, {k})); cannot fit {model_name}"
         )
-    usable = target.table.valid.reshape(-1) & _grid_above()
+    usable = target.table.valid.reshape(-1) & merl.grid_above_horizon().numpy()
     if not usable.any():
         raise DataError(f"{target.name}: no valid MERL cell above the horizon (all cells invalid); cannot fit {model_name}")
     return usable

@@ -30,7 +30,7 @@ class Lambert(Representation):
 
     def fit(self, target: Material, *, seed: int = 0) -> "Lambert":
         wi, wo = (d[:, 2].numpy() for d in merl.grid_directions())
-        valid = target.table.valid.reshape(-1) & (wi > 0) & (wo > 0)
+        valid = target.table.valid.reshape(-1) & merl.grid_above_horizon().numpy()
         weights = (wi * wo)[valid]
         values = target.table.values.reshape(3, -1)[:, valid]
         self.albedo = torch.tensor([math.pi * weighted_median(v, weights) for v in values], dtype=torch.float64)

@@ -36,8 +36,7 @@ _CHUNK = 1 << 17
 def _domain() -> tuple[torch.Tensor, torch.Tensor]:
     """Flat indices of the cells with both directions above the horizon, and their w = cosθi·cosθo."""
     wi, wo = merl.grid_directions()
-    above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
-    cells = torch.nonzero(above).squeeze(1)
+    cells = torch.nonzero(merl.grid_above_horizon()).squeeze(1)
     return cells, (wi[cells, 2] * wo[cells, 2])
 
 

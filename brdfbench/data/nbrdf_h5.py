@@ -147,7 +147,7 @@ def _grid_input() -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
     same for every material.
     """
     wi, wo = merl.grid_directions(torch.float64)
-    above = coords.above_horizon(wi, wo)
+    above = merl.grid_above_horizon()
     idx = torch.nonzero(above).squeeze(1)
     x = nbrdf_input(wi[idx], wo[idx]).to(torch.float32)
     return x, idx, above.numpy().reshape(merl.SHAPE)

@@ -36,7 +36,7 @@ import numpy as np
 import torch
 
 from .. import merl
-from ..coords import above_horizon, half_vector
+from ..coords import half_vector
 from ..errors import ConfigError, DataError
 from ..merl import MerlTable
 from ..protocol import Material
@@ -296,7 +296,7 @@ def grid_geometry() -> tuple[Geometry, np.ndarray, np.ndarray]:
     theta_d = angles.theta_d.reshape(merl.SHAPE)[:1, :, :1]
     cos_i = wi[:, 2].reshape(merl.SHAPE)
     cos_o = wo[:, 2].reshape(merl.SHAPE)
-    above = above_horizon(wi, wo).reshape(merl.SHAPE)
+    above = merl.grid_above_horizon().reshape(merl.SHAPE)
     # The grid is symmetric under φd → π - φd (ωi ⇄ ωo); use it exactly so terms are computed once.
     mirrored = bool(torch.equal(above, above.flip(-1)) and (cos_i.flip(-1) - cos_o).abs().max() < 1e-12)
     g = Geometry(

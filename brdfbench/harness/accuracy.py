@@ -39,7 +39,7 @@ def evaluate_accuracy(
 
     if "merl_grid" in by_domain:
         wi, wo = merl.grid_directions(torch.float64)
-        valid = torch.from_numpy(target.table.valid.reshape(-1)) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+        valid = torch.from_numpy(target.table.valid.reshape(-1)) & merl.grid_above_horizon()
         wi, wo = wi[valid], wo[valid]
         ref = torch.from_numpy(target.table.values.reshape(3, -1)).T[valid]
         for s in _chunks(wi.shape[0], chunk):
