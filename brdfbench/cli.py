@@ -8,6 +8,8 @@ leaderboard). Subcommands that need no config:
     brdfbench report [--results DIR]    regenerate the leaderboard from the results store
     brdfbench check NAME                run the conformance kit on a representation
     brdfbench inspect MODEL.safetensors describe a saved model (loads no code)
+    brdfbench convert SRC DEST          convert neural-BRDF weights between formats
+                                        (.h5, .npy 675-vector, .pt state_dict, .safetensors)
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from pathlib import Path
 
 from .errors import BrdfbenchError
 
-SUBCOMMANDS = ("list", "report", "check", "inspect")
+SUBCOMMANDS = ("list", "report", "check", "inspect", "convert")
 EXIT_ERROR = 2
 
 
@@ -70,6 +72,19 @@ def cmd_inspect(args) -> int:
     return 0
 
 
+def cmd_convert(args) -> int:
+    try:
+        from brdfbench_representations.nbrdf_formats import read_network, write_network
+    except ImportError as exc:  # the built-in plugins are part of the package, but say so if missing
+        return _fail(f"convert needs the built-in representations ({exc})")
+
+    network = read_network(args.src, hidden=args.hidden, raw_units=args.raw_units, features=args.features)
+    path = write_network(network, args.dest)
+    units = "raw MERL units (read back with --raw-units)" if network.raw_units else "1/sr"
+    print(f"{path}: {network.features} network 6-{'-'.join(map(str, network.hidden))}-3, outputs in {units}")
+    return 0
+
+
 def _subcommand_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="brdfbench", description="BRDF benchmark utilities")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -86,6 +101,14 @@ def _subcommand_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("inspect", help="describe a saved model file")
     p.add_argument("path")
     p.set_defaults(func=cmd_inspect)
+    p = sub.add_parser("convert", help="convert neural-BRDF weights (.h5 .npy .pt .safetensors) to .npy, .pt or .safetensors")
+    p.add_argument("src", help="Keras .h5 (published NBRDF), flat .npy vector, torch .pt state_dict, or brdfbench .safetensors")
+    p.add_argument("dest", help="output file; its suffix picks the format (.npy, .pt, .safetensors)")
+    p.add_argument("--hidden", type=int, nargs="+", default=[21, 21], help="hidden widths of a .npy/.h5 source (default 21 21)")
+    p.add_argument("--raw-units", action="store_true", help="the source outputs raw (unscaled) MERL values, not 1/sr")
+    p.add_argument("--features", choices=("rusinkiewicz", "directions"), default="rusinkiewicz",
+                   help="input encoding of a .npy/.pt/.h5 source: nbrdf (rusinkiewicz) or naive_mlp (directions)")
+    p.set_defaults(func=cmd_convert)
     return parser
 
 

@@ -24,6 +24,8 @@ _FORMAT = "brdfbench.model/1"
 
 
 def _sniff_refusal(path: Path, head: bytes) -> str | None:
+    if head[8:9] == b"{":  # safetensors: a little-endian u64 header length, then the JSON header
+        return None  # (that length may start with the bytes of a pickle's protocol mark)
     if head[:1] == b"\x80" and len(head) > 1 and head[1] <= 5:
         return "is a Python pickle; models are never unpickled (save them with brdfbench.modelio.save)"
     if head[:4] == b"PK\x03\x04":
@@ -53,7 +55,7 @@ def load(path: str | os.PathLike) -> tuple[str, Representation]:
     path = Path(path)
     try:
         with open(path, "rb") as f:
-            head = f.read(8)
+            head = f.read(9)
     except OSError as exc:
         raise ModelFileError(f"{path}: cannot read model file ({exc.strerror})") from None
     refusal = _sniff_refusal(path, head)

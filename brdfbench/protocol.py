@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any, ClassVar, Iterable
+from typing import Any, ClassVar, Iterable, Sequence
 
 import torch
 
@@ -71,6 +71,17 @@ class Representation(ABC):
     @abstractmethod
     def fit(self, target: Material, *, seed: int = 0) -> "Representation":
         """Fit to a measured material; returns self."""
+
+    # -- fitting many materials at once --------------------------------------------
+    @property
+    def fit_batch_size(self) -> int:
+        """How many materials the runner passes to one `fit_many` call (1: one at a time)."""
+        return 1
+
+    def fit_many(self, targets: Sequence[Material], *, seed: int = 0, progress: bool | str = False) -> list["Representation"]:
+        """One fitted model per target, in order; representations that fit several materials
+        faster together (stacked networks) override this. `self` is left unfitted."""
+        return [type(self)(**self.params).fit(t, seed=seed) for t in targets]
 
     # -- training (representations with state shared across materials) ------------
     #: True for representations that learn shared state (e.g. a PCA basis) from a

@@ -109,6 +109,7 @@ def run(cfg: RunConfig) -> dict[str, int]:
             git_sha=git_sha(), timestamp=now(),
         )
 
+    fitter = None
     bar = tqdm(total=len(dataset), desc=f"{cfg.label} on {cfg.dataset}", unit="material", dynamic_ncols=True)
     for train_names, fit_names in plan_folds(dataset.materials, rep_cls.needs_training, cfg.harness.folds, cfg.seed):
         pending = [n for n in fit_names if not store.has_cell(cfg.label, chash, dataset.fingerprint, n)]
@@ -136,39 +137,65 @@ def run(cfg: RunConfig) -> dict[str, int]:
                     counts["failed"] += 1
                     bar.update(1)
                 continue
-        for name in pending:
-            material = dataset.load(name)  # bad data raises DataError: stop, naming the file
+        if trained is None and fitter is None:
+            fitter = rep_spec.create(**cfg.representation_params)  # one per job: it may carry a shared initialisation
+        batch = 1 if trained is not None else max(1, int(fitter.fit_batch_size))
+        for start in range(0, len(pending), batch):
+            chunk = pending[start:start + batch]
+            materials = [dataset.load(name) for name in chunk]  # bad data raises DataError: stop, naming the file
             try:
-                with time_limit(cfg.harness.timeout_s, f"{cfg.label} on {name}"):
+                with time_limit(None if cfg.harness.timeout_s is None else cfg.harness.timeout_s * len(chunk),
+                                f"fitting {cfg.label} to {', '.join(chunk)}"):
                     torch.manual_seed(cfg.seed)
-                    model = trained if trained is not None else rep_spec.create(**cfg.representation_params)
                     t0 = time.perf_counter()
-                    model.fit(material, seed=cfg.seed)
-                    fit_s = time.perf_counter() - t0
-                    measurements = evaluate_accuracy(
-                        model, material, metric_specs, n_random=cfg.harness.n_random, seed=cfg.seed, dtype=dtype,
-                    )
-                    measurements.append(Measurement("fit_time", fit_s, "s", False))
-                    fit_loss = model.metadata().get(FIT_LOSS_KEY)
-                    if isinstance(fit_loss, (int, float)):
-                        measurements.append(Measurement("fit_loss", float(fit_loss), "objective", False))
-                    measurements.extend(extra)
-                    measurements.append(evaluation_throughput(model, batch=cfg.harness.throughput_batch, seed=cfg.seed, dtype=dtype))
-                    measurements.extend(model_size(model))
-                    if cfg.save_models:
-                        modelio.save(model, cfg.representation, cfg.results_dir / "models" / dataset.fingerprint / cfg.label / f"{name}.safetensors")
+                    if trained is not None:
+                        models = [trained.fit(materials[0], seed=cfg.seed)]
+                    elif batch == 1:
+                        models = [rep_spec.create(**cfg.representation_params).fit(materials[0], seed=cfg.seed)]
+                    else:
+                        models = fitter.fit_many(materials, seed=cfg.seed, progress=f"fitting {len(chunk)} materials")
+                    fit_s = (time.perf_counter() - t0) / len(chunk)  # amortised over the batch
+                    if len(models) != len(chunk):
+                        raise RuntimeError(f"fit_many returned {len(models)} models for {len(chunk)} materials")
             except BrdfbenchError:
                 raise
-            except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
-                log.warning("%s failed on %s: %s", cfg.label, name, exc)
+            except Exception as exc:  # a failed fit fails every cell of its batch, and the sweep goes on
+                log.warning("%s failed to fit %s: %s", cfg.label, ", ".join(chunk), exc)
                 message = "".join(traceback.format_exception_only(type(exc), exc)).strip()
-                store.write_cell([row(name, material.category, None, "failed", message)])
-                counts["failed"] += 1
-            else:
-                store.write_cell([row(name, material.category, m) for m in measurements])
-                counts["done"] += 1
-                bar.set_postfix(fit_s=f"{fit_s:.2f}")
-            bar.update(1)
+                for name, material in zip(chunk, materials):
+                    store.write_cell([row(name, material.category, None, "failed", message)])
+                    counts["failed"] += 1
+                    bar.update(1)
+                continue
+            fit_extra = [Measurement("fit_batch", float(len(chunk)), "materials", False)] if batch > 1 else []
+            for name, material, model in zip(chunk, materials, models):
+                try:
+                    with time_limit(cfg.harness.timeout_s, f"{cfg.label} on {name}"):
+                        measurements = evaluate_accuracy(
+                            model, material, metric_specs, n_random=cfg.harness.n_random, seed=cfg.seed, dtype=dtype,
+                        )
+                        measurements.append(Measurement("fit_time", fit_s, "s", False))
+                        measurements.extend(fit_extra)
+                        fit_loss = model.metadata().get(FIT_LOSS_KEY)
+                        if isinstance(fit_loss, (int, float)):
+                            measurements.append(Measurement("fit_loss", float(fit_loss), "objective", False))
+                        measurements.extend(extra)
+                        measurements.append(evaluation_throughput(model, batch=cfg.harness.throughput_batch, seed=cfg.seed, dtype=dtype))
+                        measurements.extend(model_size(model))
+                        if cfg.save_models:
+                            modelio.save(model, cfg.representation, cfg.results_dir / "models" / dataset.fingerprint / cfg.label / f"{name}.safetensors")
+                except BrdfbenchError:
+                    raise
+                except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
+                    log.warning("%s failed on %s: %s", cfg.label, name, exc)
+                    message = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+                    store.write_cell([row(name, material.category, None, "failed", message)])
+                    counts["failed"] += 1
+                else:
+                    store.write_cell([row(name, material.category, m) for m in measurements])
+                    counts["done"] += 1
+                    bar.set_postfix(fit_s=f"{fit_s:.2f}")
+                bar.update(1)
     bar.close()
     return counts
 

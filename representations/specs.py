@@ -38,3 +38,15 @@ BLINN_PHONG = RepresentationSpec(
     target="brdfbench_representations.analytic:BlinnPhong",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
 )
+NBRDF = RepresentationSpec(
+    name="nbrdf",
+    description="Neural BRDF (Sztrajman et al. 2021): MLP 6-21-21-3 on Rusinkiewicz h, d; exp-1 output; batched L1-log-cos fit",
+    target="brdfbench_representations.nbrdf:NBRDF",
+    tags=frozenset({"isotropic", "fittable", "neural"}),
+)
+NAIVE_MLP = RepresentationSpec(
+    name="naive_mlp",
+    description="The same MLP budget fed (wi, wo) directly: the naive neural baseline of the triplane paper (seed 002)",
+    target="brdfbench_representations.nbrdf:NaiveMLP",
+    tags=frozenset({"fittable", "neural"}),
+)

@@ -23,15 +23,21 @@ import torch
 from .. import coords, merl
 from ..errors import DataError
 
-#: weight name -> (HDF5 dataset key, expected shape).
-LAYOUT: dict[str, tuple[str, tuple[int, ...]]] = {
-    "W1": ("dense_1/dense_1/kernel:0", (6, 21)),
-    "b1": ("dense_1/dense_1/bias:0", (21,)),
-    "W2": ("dense_2/dense_2/kernel:0", (21, 21)),
-    "b2": ("dense_2/dense_2/bias:0", (21,)),
-    "W3": ("dense_3/dense_3/kernel:0", (21, 3)),
-    "b3": ("dense_3/dense_3/bias:0", (3,)),
-}
+PUBLISHED_HIDDEN = (21, 21)
+
+
+def layout(hidden=PUBLISHED_HIDDEN) -> dict[str, tuple[str, tuple[int, ...]]]:
+    """weight name -> (HDF5 dataset key, expected shape) of a Keras 6 → hidden… → 3 network."""
+    sizes = [6, *hidden, 3]
+    out = {}
+    for i, (n_in, n_out) in enumerate(zip(sizes[:-1], sizes[1:]), start=1):
+        out[f"W{i}"] = (f"dense_{i}/dense_{i}/kernel:0", (n_in, n_out))
+        out[f"b{i}"] = (f"dense_{i}/dense_{i}/bias:0", (n_out,))
+    return out
+
+
+#: The published release's layout (6 → 21 → 21 → 3, 675 weights).
+LAYOUT = layout()
 
 #: The pre-exp value is clamped here so exp() stays finite even in fp32 (exp(80) ≈ 5.5e34
 #: < fp32 max ≈ 3.4e38). Real materials never come near: a BRDF value of 1e6 is exp(13.8).
@@ -72,8 +78,9 @@ def _read_dataset(f: h5py.File, path: Path, key: str, shape: tuple[int, ...]) ->
     return data
 
 
-def read_nbrdf_h5(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """The six weight arrays (float32) of a published NBRDF `.h5` file: W1, b1, W2, b2, W3, b3.
+def read_nbrdf_h5(path: str | os.PathLike, hidden=PUBLISHED_HIDDEN) -> dict[str, np.ndarray]:
+    """The weight arrays (float32) of an NBRDF `.h5` file: W1, b1, W2, b2, W3, b3 for the
+    published 6 → 21 → 21 → 3 networks (other `hidden` sizes: one more pair per layer).
 
     Raises `DataError` naming the file (and dataset key) for an unreadable or non-HDF5
     file, a missing dataset, a wrong shape or dtype, or non-finite weights.
@@ -89,7 +96,7 @@ def read_nbrdf_h5(path: str | os.PathLike) -> dict[str, np.ndarray]:
         raise _fail(path, None, f"cannot open as HDF5 ({exc})") from None
     with f:
         weights = {}
-        for name, (key, shape) in LAYOUT.items():
+        for name, (key, shape) in layout(hidden).items():
             try:
                 weights[name] = _read_dataset(f, path, key, shape)
             except DataError:
@@ -107,17 +114,14 @@ def nbrdf_input(wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
     `coords.to_half_diff`.
     """
     hd = coords.to_half_diff(wi, wo)
-    st_h = torch.sin(hd.theta_h)
-    st_d = torch.sin(hd.theta_d)
+    return nbrdf_input_from_angles(hd.theta_h, hd.theta_d, hd.phi_d)
+
+
+def nbrdf_input_from_angles(theta_h: torch.Tensor, theta_d: torch.Tensor, phi_d: torch.Tensor) -> torch.Tensor:
+    """The same input (N, 6) from Rusinkiewicz angles."""
+    st_h, st_d = torch.sin(theta_h), torch.sin(theta_d)
     return torch.stack(
-        (
-            st_h,
-            torch.zeros_like(st_h),
-            torch.cos(hd.theta_h),
-            st_d * torch.cos(hd.phi_d),
-            st_d * torch.sin(hd.phi_d),
-            torch.cos(hd.theta_d),
-        ),
+        (st_h, torch.zeros_like(st_h), torch.cos(theta_h), st_d * torch.cos(phi_d), st_d * torch.sin(phi_d), torch.cos(theta_d)),
         dim=-1,
     )
 

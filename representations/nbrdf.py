@@ -1,0 +1,198 @@
+"""Neural BRDFs: NBRDF (Sztrajman et al. 2021) and the naive direction-input MLP.
+
+`nbrdf` is an MLP 6 → 21 → 21 → 3 (hidden sizes configurable) on the Rusinkiewicz
+encoding (see mlp.py); `naive_mlp` is the same budget fed (ωi, ωo) directly, the
+baseline of Timonen et al. Both fit many materials at once (`fit_many`, see
+nbrdf_fit.py); the runner hands them `batch_materials` materials per call.
+
+Initialisation (`init`): "random" draws Glorot weights from a seed derived from the run
+seed and the material name, so a material's fit does not depend on its batch-mates;
+"shared" fits the first material this model sees from random weights and starts every
+later material from that network, which keeps the weight vectors of different materials
+aligned for generators that learn over them; a path starts every material from the
+network in that file (any format `nbrdf_formats.read_network` reads).
+"""
+
+from __future__ import annotations
+
+import zlib
+from pathlib import Path
+from typing import Any, ClassVar, Sequence
+
+import torch
+
+from brdfbench import merl
+from brdfbench.errors import ConfigError, ModelFileError
+from brdfbench.protocol import FIT_LOSS_KEY, Material, Representation
+
+from . import mlp
+from .nbrdf_fit import Recipe, fit_batched
+
+DEFAULT_HIDDEN = (21, 21)
+DEFAULT_BATCH_MATERIALS = 16
+
+
+def material_seed(seed: int, name: str) -> int:
+    return (seed * 1_000_003 + zlib.crc32(name.encode("utf-8"))) % 2**63
+
+
+class NeuralBRDF(Representation):
+    """An MLP BRDF; subclasses choose the input encoding."""
+
+    features: ClassVar[str] = "rusinkiewicz"
+    plugin_name: ClassVar[str] = "nbrdf"
+
+    def __init__(
+        self,
+        hidden: Sequence[int] = DEFAULT_HIDDEN,
+        epochs: int = Recipe.epochs,
+        batch_size: int = Recipe.batch_size,
+        lr: float = Recipe.lr,
+        schedule: str = Recipe.schedule,
+        n_samples: int = Recipe.n_samples,
+        output: str = Recipe.output,
+        patience: int | None = Recipe.patience,
+        min_improvement: float = Recipe.min_improvement,
+        batch_materials: int = DEFAULT_BATCH_MATERIALS,
+        init: str = "random",
+        raw_units: bool = False,
+    ):
+        name = self.plugin_name
+        try:
+            hidden = [int(h) for h in hidden]
+        except (TypeError, ValueError):
+            raise ConfigError(f"{name}: hidden={hidden!r} must be a list of layer widths") from None
+        if not hidden or any(h < 1 for h in hidden):
+            raise ConfigError(f"{name}: hidden={hidden!r} must be a non-empty list of positive layer widths")
+        if not isinstance(batch_materials, int) or batch_materials < 1:
+            raise ConfigError(f"{name}: batch_materials={batch_materials!r} must be a positive integer")
+        if not isinstance(init, str) or not init:
+            raise ConfigError(f"{name}: init={init!r} must be 'random', 'shared' or a path to a network file")
+        super().__init__(
+            hidden=hidden, epochs=epochs, batch_size=batch_size, lr=lr, schedule=schedule, n_samples=n_samples,
+            output=output, patience=patience, min_improvement=min_improvement, batch_materials=batch_materials,
+            init=init, raw_units=bool(raw_units),
+        )
+        self.hidden = hidden
+        self.recipe = Recipe(epochs=epochs, batch_size=batch_size, lr=lr, schedule=schedule, n_samples=n_samples,
+                             output=output, patience=patience, min_improvement=min_improvement)
+        self.output_scale = torch.tensor(merl.CHANNEL_SCALES if raw_units else (1.0, 1.0, 1.0), dtype=torch.float32)
+        self.weights: dict[str, torch.Tensor] | None = None
+        self.fit_info: dict[str, Any] = {}
+        self._anchor: dict[str, torch.Tensor] | None = None  # the start of every fit, once known
+
+    def _read_init(self, path: Path) -> dict[str, torch.Tensor]:
+        from .nbrdf_formats import read_network
+
+        network = read_network(path, hidden=self.hidden, features=self.features, raw_units=self.params["raw_units"])
+        if mlp.hidden_of(network.weights) != self.hidden:
+            raise ConfigError(f"{self.plugin_name}: init network {path} has hidden sizes {mlp.hidden_of(network.weights)}, "
+                              f"this model {self.hidden}")
+        if network.features != self.features:
+            raise ModelFileError(f"{path}: a {network.features!r}-input network cannot start a {self.features!r}-input model")
+        return network.weights
+
+    # -- fitting -----------------------------------------------------------------
+    @property
+    def fit_batch_size(self) -> int:
+        return self.params["batch_materials"]
+
+    def fit(self, target: Material, *, seed: int = 0) -> "NeuralBRDF":
+        fitted = self.fit_many([target], seed=seed)[0]
+        self.weights, self.fit_info = fitted.weights, fitted.fit_info
+        return self
+
+    def fit_many(self, targets: Sequence[Material], *, seed: int = 0, progress: bool | str = False) -> list["NeuralBRDF"]:
+        """One fitted model per target, all trained together in batched passes."""
+        targets = list(targets)
+        if self._anchor is None and self.params["init"] not in ("random", "shared"):
+            self._anchor = self._read_init(Path(self.params["init"]))
+        models: list[NeuralBRDF | None] = [None] * len(targets)
+        pending = list(range(len(targets)))
+        if self.params["init"] == "shared" and self._anchor is None and targets:
+            first = self._fit_group([targets[0]], [self._random_init(targets[0], seed)], seed, progress)[0]
+            self._anchor = first.weights
+            models[0] = first
+            pending = pending[1:]
+        for start in range(0, len(pending), self.fit_batch_size):
+            group = [targets[i] for i in pending[start:start + self.fit_batch_size]]
+            inits = [self._anchor if self._anchor is not None else self._random_init(t, seed) for t in group]
+            for i, model in zip(pending[start:start + self.fit_batch_size], self._fit_group(group, inits, seed, progress)):
+                models[i] = model
+        return models
+
+    def _random_init(self, target: Material, seed: int) -> dict[str, torch.Tensor]:
+        return mlp.glorot_init(self.hidden, torch.Generator().manual_seed(material_seed(seed, target.name)))
+
+    def _fit_group(self, group, inits, seed, progress) -> list["NeuralBRDF"]:
+        outcomes = fit_batched(
+            [t.table for t in group], inits, features=self.features, recipe=self.recipe,
+            output_scale=self.output_scale, sample_seed=seed, progress=progress,
+        )
+        fitted = []
+        for target, outcome in zip(group, outcomes):
+            model = type(self)(**self.params)
+            model._anchor = self._anchor
+            model.weights = outcome.weights
+            model.fit_info = {FIT_LOSS_KEY: outcome.loss, "epochs": outcome.epochs, "fitted_to": target.name}
+            fitted.append(model)
+        return fitted
+
+    # -- evaluation ----------------------------------------------------------------
+    def _eval(self, wi, wo):
+        if self.weights is None:
+            raise RuntimeError(f"{self.plugin_name}: evaluate after fit() or load")
+        z = mlp.last_layer(self.weights, mlp.encode(wi, wo, self.features))
+        return mlp.to_value(z, self.output_scale)
+
+    # -- persistence and cost -----------------------------------------------------------
+    def state_dict(self):
+        if self.weights is None:
+            return {}
+        return {**self.weights, "output_scale": self.output_scale}
+
+    def metadata(self):
+        return dict(self.fit_info, features=self.features)
+
+    @classmethod
+    def from_state(cls, params, tensors, metadata):
+        model = cls(**params)
+        expected = mlp.weight_shapes(model.hidden)
+        if tensors:
+            for key, shape in expected.items():
+                if key not in tensors:
+                    raise ModelFileError(f"{cls.plugin_name} model lacks tensor {key!r}")
+                if tuple(tensors[key].shape) != shape:
+                    raise ModelFileError(f"{cls.plugin_name} model tensor {key!r} has shape {tuple(tensors[key].shape)}, expected {shape}")
+                if not torch.isfinite(tensors[key]).all():
+                    raise ModelFileError(f"{cls.plugin_name} model tensor {key!r} holds NaN or Inf")
+            model.weights = {k: tensors[k].to(torch.float32) for k in expected}
+            if "output_scale" in tensors:
+                model.output_scale = tensors["output_scale"].to(torch.float32)
+        model.fit_info = {k: v for k, v in metadata.items() if k != "features"}
+        return model
+
+    @property
+    def nbytes(self) -> int:
+        return 4 * mlp.n_weights(self.hidden)  # float32 weights; the 3 channel scales are a constant of the units
+
+    @property
+    def flops_per_eval(self) -> int:
+        encoding = mlp.RUSINKIEWICZ_FLOPS if self.features == "rusinkiewicz" else 0
+        return encoding + mlp.mlp_flops(self.hidden)
+
+
+class NBRDF(NeuralBRDF):
+    """6 → 21 → 21 → 3 on the Rusinkiewicz encoding (isotropic by construction)."""
+
+    tags = frozenset({"isotropic", "fittable", "neural"})
+    features = "rusinkiewicz"
+    plugin_name = "nbrdf"
+
+
+class NaiveMLP(NeuralBRDF):
+    """The same network fed (ωi, ωo) directly: neither isotropic nor reciprocal by construction."""
+
+    tags = frozenset({"fittable", "neural"})
+    features = "directions"
+    plugin_name = "naive_mlp"

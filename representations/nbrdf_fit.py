@@ -1,0 +1,302 @@
+"""Fitting many neural BRDFs at once: stacked weights, one batched matmul per layer.
+
+Every material of a batch sees the same training samples in the same order, drawn
+uniformly in (θh, θd, φd) — the BRDF-aware sampling of Sztrajman et al. (2021), which puts
+many samples near the specular peak (small θh) — with pairs below the horizon dropped
+for all, and each material's invalid (negative) cells dropped for it alone. The weights
+of M materials are stacked (M, in, out); a minibatch of B samples runs through all of
+them as batched matrix products, and a hand-written Adam updates the stack. Each
+material's loss is normalised by its own valid-sample count, so the gradients of
+different materials never mix: a material's fit does not depend on its batch-mates
+(`fit_batched` of one material is the one-at-a-time loop, same arithmetic).
+
+Loss: mean |log(1 + f cos θi) − log(1 + f̂ cos θi)| over valid samples and channels.
+With output="log" (the default) the prediction is computed from the last layer's z as
+log(1 + expm1(z) c) = logaddexp(z + log c, log(1 − c)): exact, finite for any z (no fp32
+overflow), and with a gradient everywhere — unlike the reference's relu(expm1(z)),
+whose clamp stops every gradient once a dark material's outputs all go negative. The
+clamp at 0 is applied at evaluation only. output="clamped" reproduces the reference.
+
+Early stop: in the second half of the schedule (where the learning rate anneals and the
+loss falls steadily; earlier, a plateau at a high rate is noise), a material leaves the
+batch — its rows are compacted out, which makes the remaining epochs cheaper — once its
+epoch loss improved by less than `min_improvement` (relative) over `patience` epochs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Callable, Sequence
+
+import torch
+from tqdm.auto import tqdm
+
+from brdfbench import coords, merl
+from brdfbench.errors import ConfigError
+
+from . import mlp
+
+SCHEDULES = ("onecycle", "constant")
+OUTPUTS = ("log", "clamped")
+ADAM_BETAS = (0.9, 0.999)
+ADAM_EPS = 1e-7  # Keras' default, as the reference recipe used
+ONECYCLE_WARMUP = 0.1  # fraction of the steps spent warming up
+ONECYCLE_START_DIV = 25.0  # the warm-up starts at lr / 25
+ONECYCLE_END_DIV = 1e4  # and the cosine anneal ends at lr / 1e4
+COS_MIN = 1e-7  # cos θi is clamped into [COS_MIN, 1 − 2⁻²⁴] inside the log-space loss
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """How to train: sample count, epochs, minibatch, learning rate and its schedule."""
+
+    epochs: int = 15
+    batch_size: int = 2048
+    lr: float = 2e-2
+    schedule: str = "onecycle"
+    n_samples: int = 800_000  # drawn before dropping pairs below the horizon (about 62 % stay)
+    output: str = "log"
+    patience: int | None = 2
+    min_improvement: float = 5e-3
+
+    def __post_init__(self):
+        def bad(key, why):
+            raise ConfigError(f"nbrdf: {key}={getattr(self, key)!r}: {why}")
+
+        for key in ("epochs", "batch_size", "n_samples"):
+            value = getattr(self, key)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                bad(key, "must be a positive integer")
+        if not (isinstance(self.lr, (int, float)) and math.isfinite(self.lr) and self.lr > 0):
+            bad("lr", "must be a positive number")
+        if self.schedule not in SCHEDULES:
+            bad("schedule", f"expected one of {', '.join(SCHEDULES)}")
+        if self.output not in OUTPUTS:
+            bad("output", f"expected one of {', '.join(OUTPUTS)}")
+        if self.patience is not None and (not isinstance(self.patience, int) or self.patience < 1):
+            bad("patience", "must be a positive integer, or null for no early stop")
+
+
+#: The published recipe of Sztrajman et al. (2021): Adam 5e-4, minibatch 512, 100 epochs,
+#: constant rate, output relu(expm1(z)) in training too, no early stop.
+REFERENCE_RECIPE = Recipe(epochs=100, batch_size=512, lr=5e-4, schedule="constant", output="clamped", patience=None)
+
+
+@dataclass(frozen=True)
+class Samples:
+    """Training inputs shared by every material: encodings, cos θi, and MERL cells."""
+
+    x: torch.Tensor  # (S, 6) float32
+    cos_i: torch.Tensor  # (S,) float32
+    cells: torch.Tensor  # (S,) flat MERL cell index of each pair (nearest cell, as the reference)
+
+
+def draw_samples(n: int, features: str, seed: int) -> Samples:
+    """n pairs uniform in (θh, θd, φd) (and φh, for direction inputs), above-horizon ones kept."""
+    g = torch.Generator().manual_seed(seed)
+    theta_h = torch.rand(n, generator=g, dtype=torch.float64) * (math.pi / 2)
+    theta_d = torch.rand(n, generator=g, dtype=torch.float64) * (math.pi / 2)
+    phi_d = torch.rand(n, generator=g, dtype=torch.float64) * (2 * math.pi)
+    phi_h = torch.rand(n, generator=g, dtype=torch.float64) * (2 * math.pi)
+    if features == "rusinkiewicz":
+        phi_h = torch.zeros_like(phi_h)  # the encoding drops φh: keep the pairs in its frame
+    wi, wo = coords.from_half_diff(theta_h, phi_h, theta_d, phi_d)
+    keep = coords.above_horizon(wi, wo)
+    wi, wo = wi[keep], wo[keep]
+    theta_h, theta_d, phi_d = theta_h[keep], theta_d[keep], phi_d[keep]
+    if features == "rusinkiewicz":
+        x = mlp.encode_angles(theta_h, theta_d, phi_d)
+    else:
+        x = mlp.encode(wi, wo, features)
+    cells = (merl.theta_half_index(theta_h) * merl.RES_THETA_D + merl.theta_diff_index(theta_d)) * merl.RES_PHI_D
+    cells = cells + merl.phi_diff_index(phi_d)
+    return Samples(x=x.to(torch.float32), cos_i=wi[:, 2].to(torch.float32), cells=cells)
+
+
+def targets(table: merl.MerlTable, samples: Samples, output_scale: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """log(1 + f cos θi) (S, 3) float32 of one material in the network's units, and its valid mask (S,)."""
+    values = torch.from_numpy(table.values.reshape(3, -1))[:, samples.cells].T  # (S, 3) float64, 1/sr
+    valid = (values >= 0).all(dim=1)
+    f = values.clamp(min=0) / output_scale.to(torch.float64)
+    return torch.log1p(f * samples.cos_i.double()[:, None]).to(torch.float32), valid
+
+
+@dataclass
+class Outcome:
+    """One material's fitted weights, its final training loss and the epochs it ran."""
+
+    weights: dict[str, torch.Tensor]
+    loss: float
+    epochs: int
+
+
+def learning_rate(recipe: Recipe, step: int, total: int) -> float:
+    if recipe.schedule == "constant":
+        return recipe.lr
+    warm = max(1, int(ONECYCLE_WARMUP * total))
+    if step < warm:
+        start = recipe.lr / ONECYCLE_START_DIV
+        return start + (recipe.lr - start) * step / warm
+    t = (step - warm) / max(1, total - warm)
+    end = recipe.lr / ONECYCLE_END_DIV
+    return end + (recipe.lr - end) * 0.5 * (1 + math.cos(math.pi * t))
+
+
+class _Stack:
+    """Stacked weights of the active materials with their Adam moments."""
+
+    def __init__(self, inits: Sequence[dict[str, torch.Tensor]], names: list[str]):
+        self.names = names
+        self.params = []
+        for name in names:
+            t = torch.stack([w[name].to(torch.float32) for w in inits])
+            if name.startswith("b"):
+                t = t[:, None, :]  # (M, 1, out): broadcasts over the minibatch
+            self.params.append(t.contiguous().requires_grad_())
+        self.m = [torch.zeros_like(p) for p in self.params]
+        self.v = [torch.zeros_like(p) for p in self.params]
+        self.t = 0
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """z (M, B, 3) for a shared minibatch x (B, 6)."""
+        h = x
+        n = len(self.params) // 2
+        for i in range(n):
+            w, b = self.params[2 * i], self.params[2 * i + 1]
+            h = torch.baddbmm(b, h, w) if h.ndim == 3 else torch.matmul(h, w) + b
+            if i < n - 1:
+                h = torch.relu(h)
+        return h
+
+    @torch.no_grad()
+    def adam_step(self, lr: float) -> None:
+        self.t += 1
+        b1, b2 = ADAM_BETAS
+        c1, c2 = 1 - b1**self.t, 1 - b2**self.t
+        for p, m, v in zip(self.params, self.m, self.v):
+            g = p.grad
+            m.mul_(b1).add_(g, alpha=1 - b1)
+            v.mul_(b2).addcmul_(g, g, value=1 - b2)
+            denom = (v / c2).sqrt_().add_(ADAM_EPS)
+            p.addcdiv_(m, denom, value=-lr / c1)
+            p.grad = None
+
+    def keep(self, rows: torch.Tensor) -> None:
+        with torch.no_grad():
+            self.params = [p[rows].contiguous().requires_grad_() for p in self.params]
+            self.m = [m[rows].contiguous() for m in self.m]
+            self.v = [v[rows].contiguous() for v in self.v]
+
+    def weights(self, row: int) -> dict[str, torch.Tensor]:
+        out = {}
+        for name, p in zip(self.names, self.params):
+            t = p[row].detach().clone()
+            out[name] = t[0] if name.startswith("b") else t
+        return out
+
+
+def fit_batched(
+    tables: Sequence[merl.MerlTable],
+    inits: Sequence[dict[str, torch.Tensor]],
+    *,
+    features: str = "rusinkiewicz",
+    recipe: Recipe = Recipe(),
+    output_scale: torch.Tensor | None = None,
+    sample_seed: int = 0,
+    samples: Samples | None = None,
+    progress: bool | str = False,
+    on_epoch: Callable[[int, torch.Tensor], None] | None = None,
+) -> list[Outcome]:
+    """Fit one network per table, all in one pass; `inits` gives each one's initial weights.
+
+    `samples` may be passed in to share one draw across several calls (it must match
+    `recipe.n_samples`, `features` and `sample_seed`); `on_epoch(epoch, losses)` sees the
+    epoch losses of the still active materials.
+    """
+    if len(tables) != len(inits) or not tables:
+        raise ValueError(f"fit_batched needs one initial weight dict per table, got {len(inits)} for {len(tables)}")
+    scale = torch.ones(3) if output_scale is None else output_scale.to(torch.float32)
+    names = list(inits[0])
+    hidden = mlp.hidden_of(inits[0])
+    for w in inits:
+        if list(w) != names or mlp.hidden_of(w) != hidden:
+            raise ValueError("every initial weight dict must have the same layout")
+    if samples is None:
+        samples = draw_samples(recipe.n_samples, features, sample_seed)
+    n_samples = samples.x.shape[0]
+    log_targets, valid = zip(*(targets(t, samples, scale) for t in tables))
+    y = torch.stack(log_targets)  # (M, S, 3)
+    mask = torch.stack(valid).to(torch.float32)  # (M, S)
+    if (mask.sum(dim=1) == 0).any():
+        raise ValueError("a target material has no valid cell at the training samples")
+    cos = samples.cos_i.clamp(COS_MIN, 1 - 2.0**-24)
+    log_c, log_1mc = torch.log(cos), torch.log1p(-cos)
+
+    stack = _Stack(inits, names)
+    active = torch.arange(len(tables))
+    outcomes: list[Outcome | None] = [None] * len(tables)
+    best = torch.full((len(tables),), math.inf)
+    since_best = torch.zeros(len(tables), dtype=torch.long)
+    last_loss = torch.full((len(tables),), math.inf)
+    steps_per_epoch = math.ceil(n_samples / recipe.batch_size)
+    total_steps = recipe.epochs * steps_per_epoch
+    order = torch.Generator().manual_seed(sample_seed + 1)
+    step = 0
+    bar = tqdm(range(recipe.epochs), desc=progress if isinstance(progress, str) else "nbrdf fit", unit="epoch",
+               disable=not progress, leave=False, dynamic_ncols=True)
+    for epoch in bar:
+        perm = torch.randperm(n_samples, generator=order)
+        x_e, c_e, d_e = samples.x[perm], log_c[perm], log_1mc[perm]
+        y_e, m_e = y[:, perm], mask[:, perm]
+        epoch_sum = torch.zeros(len(active))
+        epoch_count = torch.zeros(len(active))
+        for start in range(0, n_samples, recipe.batch_size):
+            sl = slice(start, start + recipe.batch_size)
+            z = stack.forward(x_e[sl])  # (M, B, 3)
+            if recipe.output == "log":
+                pred = torch.logaddexp(z + c_e[sl, None], d_e[sl, None].expand_as(z))
+            else:
+                f = torch.relu(torch.expm1(torch.clamp(z, max=mlp.MAX_LOG_VALUE)))
+                pred = torch.log1p(f * torch.exp(c_e[sl, None]))
+            m = m_e[:, sl]
+            err = (pred - y_e[:, sl]).abs().mean(dim=2) * m  # (M, B)
+            count = m.sum(dim=1)
+            per_material = err.sum(dim=1) / count.clamp(min=1)
+            per_material.sum().backward()
+            stack.adam_step(learning_rate(recipe, step, total_steps))
+            step += 1
+            epoch_sum += err.detach().sum(dim=1)
+            epoch_count += count
+        losses = epoch_sum / epoch_count.clamp(min=1)
+        last_loss[active] = losses
+        if on_epoch is not None:
+            on_epoch(epoch, losses)
+        improved = losses < best[active] * (1 - recipe.min_improvement)
+        best[active] = torch.minimum(best[active], losses)
+        since_best[active] = torch.where(improved, 0, since_best[active] + 1)
+        final = epoch == recipe.epochs - 1
+        may_stop = recipe.patience is not None and 2 * (epoch + 1) > recipe.epochs
+        if final:
+            done = torch.ones(len(active), dtype=torch.bool)
+        elif may_stop:
+            done = since_best[active] >= recipe.patience
+        else:
+            done = torch.zeros(len(active), dtype=torch.bool)
+        for row in torch.nonzero(done).flatten().tolist():
+            i = int(active[row])
+            outcomes[i] = Outcome(stack.weights(row), float(last_loss[i]), epoch + 1)
+        if done.any() and not final:
+            rows = torch.nonzero(~done).flatten()
+            stack.keep(rows)
+            active = active[rows]
+            y, mask = y[rows], mask[rows]
+        bar.set_postfix(active=len(active), median_loss=f"{float(losses.median()):.4g}")
+        if len(active) == 0:
+            break
+    bar.close()
+    return [o for o in outcomes if o is not None]
+
+
+def with_overrides(recipe: Recipe, **changes) -> Recipe:
+    return replace(recipe, **{k: v for k, v in changes.items() if v is not None})
