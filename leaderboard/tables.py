@@ -9,6 +9,7 @@ PRIMARY_METRICS = ("l1_log_cos", "l1_log", "l1", "hdr_rmse")
 #: Cost columns shown beside accuracy, with the aggregate that makes sense for each.
 COST_METRICS = {
     "fit_time": "mean",
+    "fit_batch": "median",
     "train_time": "mean",
     "evals_per_s": "median",
     "model_bytes": "median",

@@ -122,6 +122,18 @@ def targets(table: merl.MerlTable, samples: Samples, output_scale: torch.Tensor)
     return torch.log1p(f * samples.cos_i.double()[:, None]).to(torch.float32), valid
 
 
+def predict_log(z: torch.Tensor, log_c: torch.Tensor, log_1mc: torch.Tensor, output: str = "log") -> torch.Tensor:
+    """The network's log(1 + f̂ cos θi) from its last-layer value z, given log cos θi and log(1 − cos θi).
+
+    "log": f̂ = expm1(z) unclamped, so log(1 + f̂ c) = logaddexp(z + log c, log(1 − c)), finite for
+    every finite z and never without a gradient. "clamped": f̂ = relu(expm1(z)), the reference.
+    """
+    if output == "log":
+        return torch.logaddexp(z + log_c, log_1mc.expand_as(z))
+    f = torch.relu(torch.expm1(torch.clamp(z, max=mlp.MAX_LOG_VALUE)))
+    return torch.log1p(f * torch.exp(log_c))
+
+
 @dataclass
 class Outcome:
     """One material's fitted weights, its final training loss and the epochs it ran."""
@@ -254,11 +266,7 @@ def fit_batched(
         for start in range(0, n_samples, recipe.batch_size):
             sl = slice(start, start + recipe.batch_size)
             z = stack.forward(x_e[sl])  # (M, B, 3)
-            if recipe.output == "log":
-                pred = torch.logaddexp(z + c_e[sl, None], d_e[sl, None].expand_as(z))
-            else:
-                f = torch.relu(torch.expm1(torch.clamp(z, max=mlp.MAX_LOG_VALUE)))
-                pred = torch.log1p(f * torch.exp(c_e[sl, None]))
+            pred = predict_log(z, c_e[sl, None], d_e[sl, None], recipe.output)
             m = m_e[:, sl]
             err = (pred - y_e[:, sl]).abs().mean(dim=2) * m  # (M, B)
             count = m.sum(dim=1)

@@ -16,6 +16,7 @@ model multiplies by the MERL channel scales; the release's networks output 1/sr.
 
 from __future__ import annotations
 
+import numbers
 import os
 import re
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ import torch
 
 from brdfbench import merl, modelio
 from brdfbench.data.nbrdf_h5 import read_nbrdf_h5
-from brdfbench.errors import ModelFileError
+from brdfbench.errors import DataError, ModelFileError
 
 from . import mlp
 
@@ -61,19 +62,45 @@ def _check_finite(weights: Mapping[str, torch.Tensor], where: str) -> None:
             raise ModelFileError(f"{where}: weight {name!r} holds {bad} non-finite (NaN/Inf) value(s)")
 
 
+def check_hidden(hidden, where: str = "hidden") -> tuple[int, ...]:
+    """Hidden layer widths as a tuple of positive ints, or a ModelFileError naming them."""
+    try:
+        widths = tuple(hidden)
+    except TypeError:
+        widths = ()
+    if not widths or not all(isinstance(h, numbers.Integral) and not isinstance(h, bool) and h >= 1 for h in widths):
+        raise ModelFileError(f"{where}: hidden sizes {hidden!r} must be a non-empty list of positive integers")
+    return tuple(int(h) for h in widths)
+
+
+def check_features(features: str) -> str:
+    if features not in mlp.FEATURES:
+        raise ModelFileError(f"unknown input encoding features={features!r}; expected one of {', '.join(mlp.FEATURES)}")
+    return features
+
+
 # -- the flattened vector ------------------------------------------------------------------
 def flatten(weights: Mapping[str, torch.Tensor]) -> np.ndarray:
     """The float32 vector fc1.weight (out, in), fc1.bias, fc2.weight, … (row-major)."""
     n_layers = sum(1 for k in weights if k.startswith("W"))
     parts = []
     for i in range(1, n_layers + 1):
-        parts += [weights[f"W{i}"].T.reshape(-1), weights[f"b{i}"].reshape(-1)]
+        parts += [weights[f"W{i}"].detach().T.reshape(-1), weights[f"b{i}"].detach().reshape(-1)]
     return torch.cat(parts).to(torch.float32).numpy()
 
 
 def unflatten(vector, hidden: Sequence[int] = DEFAULT_HIDDEN, *, where: str = "vector") -> dict[str, torch.Tensor]:
     """Keras-layout weights from a flattened vector of a 6 → hidden… → 3 network."""
-    v = torch.as_tensor(np.asarray(vector)).reshape(-1) if not isinstance(vector, torch.Tensor) else vector.reshape(-1)
+    hidden = check_hidden(hidden, where)
+    if isinstance(vector, torch.Tensor):
+        v = vector.detach()
+    else:
+        array = np.asarray(vector)
+        if array.dtype.kind != "f":
+            raise ModelFileError(f"{where}: weight vector has dtype {array.dtype}, expected floating point")
+        v = torch.from_numpy(array.astype(array.dtype.newbyteorder("="), copy=False))  # any byte order
+    if v.ndim != 1:
+        raise ModelFileError(f"{where}: expected a 1-D weight vector, got shape {tuple(v.shape)}")
     if not v.dtype.is_floating_point:
         raise ModelFileError(f"{where}: weight vector has dtype {v.dtype}, expected floating point")
     expected = mlp.n_weights(hidden)
@@ -97,8 +124,8 @@ def to_torch_state(weights: Mapping[str, torch.Tensor]) -> dict[str, torch.Tenso
     n_layers = sum(1 for k in weights if k.startswith("W"))
     state = {}
     for i in range(1, n_layers + 1):
-        state[f"fc{i}.weight"] = weights[f"W{i}"].T.contiguous()
-        state[f"fc{i}.bias"] = weights[f"b{i}"].clone()
+        state[f"fc{i}.weight"] = weights[f"W{i}"].detach().T.contiguous()
+        state[f"fc{i}.bias"] = weights[f"b{i}"].detach().clone()
     return state
 
 
@@ -109,13 +136,21 @@ def from_torch_state(state: Mapping[str, torch.Tensor], *, where: str = "state_d
     """Keras-layout weights from {fc1.weight, fc1.bias, …} (a common prefix such as `net.`
     is allowed); the hidden sizes come from the shapes, which must chain 6 → … → 3."""
     found: dict[int, dict[str, torch.Tensor]] = {}
+    prefixes = set()
     for key, value in state.items():
         match = _FC_KEY.match(str(key))
         if match is None:
             continue
         if not isinstance(value, torch.Tensor):
             raise ModelFileError(f"{where}: {key!r} is a {type(value).__name__}, expected a tensor")
+        bad = int((~torch.isfinite(value)).sum()) if value.dtype.is_floating_point else 0
+        if bad:
+            raise ModelFileError(f"{where}: {key!r} holds {bad} non-finite (NaN/Inf) value(s)")
+        prefixes.add(match["prefix"])
         found.setdefault(int(match["i"]), {})[match["kind"]] = value
+    if len(prefixes) > 1:
+        raise ModelFileError(f"{where}: fc layers under several prefixes ({', '.join(sorted(map(repr, prefixes)))}); "
+                             "save the state_dict of one network")
     if not found:
         keys = ", ".join(map(repr, list(state)[:6])) or "none"
         raise ModelFileError(f"{where}: no fc1.weight/fc1.bias… keys (found {keys})")
@@ -162,18 +197,16 @@ def read_network(path: str | os.PathLike, *, hidden: Sequence[int] = DEFAULT_HID
         raise ModelFileError(f"{path}: no such network file")
     if suffix in MODEL_SUFFIXES:
         return _read_model(path)
+    check_features(features)
+    hidden = check_hidden(hidden, str(path))
     if suffix in H5_SUFFIXES:
-        weights = {k: torch.from_numpy(v) for k, v in read_nbrdf_h5(path, hidden=tuple(hidden)).items()}
-    elif suffix in VECTOR_SUFFIXES:
         try:
-            array = np.load(path, allow_pickle=False)
-        except ValueError as exc:
-            raise ModelFileError(f"{path}: not a plain numeric .npy array ({exc}); object arrays are never unpickled") from None
-        except OSError as exc:
-            raise ModelFileError(f"{path}: cannot read as .npy ({exc})") from None
-        if array.ndim != 1:
-            raise ModelFileError(f"{path}: expected a 1-D weight vector, got shape {array.shape}")
-        weights = unflatten(array, hidden, where=str(path))
+            arrays = read_nbrdf_h5(path, hidden=hidden)
+        except DataError as exc:  # one error type for every weight format
+            raise ModelFileError(str(exc)) from None
+        weights = {k: torch.from_numpy(v) for k, v in arrays.items()}
+    elif suffix in VECTOR_SUFFIXES:
+        weights = unflatten(_load_npy(path), hidden, where=str(path))
     else:
         state = modelio.load_torch_weights(path)  # weights_only=True: refuses anything needing pickle
         if isinstance(state, torch.Tensor):
@@ -185,11 +218,25 @@ def read_network(path: str | os.PathLike, *, hidden: Sequence[int] = DEFAULT_HID
     return Network(weights=weights, features=features, raw_units=raw_units)
 
 
+def _load_npy(path: Path) -> np.ndarray:
+    """A plain numeric array from a .npy file; never unpickles, never opens an archive."""
+    try:
+        with open(path, "rb") as f:
+            array = np.load(f, allow_pickle=False)
+    except ValueError as exc:
+        raise ModelFileError(f"{path}: not a plain numeric .npy array ({exc}); object arrays are never unpickled") from None
+    except (OSError, EOFError) as exc:
+        raise ModelFileError(f"{path}: cannot read as .npy ({exc or 'empty file'})") from None
+    if not isinstance(array, np.ndarray):  # np.load returns an archive for .npz content
+        raise ModelFileError(f"{path}: holds an .npz archive, expected one .npy array")
+    return array
+
+
 def _read_model(path: Path) -> Network:
     name, model = modelio.load(path)
-    weights = getattr(model, "weights", None)
-    if not isinstance(weights, dict) or not hasattr(model, "features"):
+    if not hasattr(model, "features") or not hasattr(model, "weights"):
         raise ModelFileError(f"{path}: a {name!r} model, not a neural BRDF (nbrdf or naive_mlp)")
+    weights = model.weights
     if not weights:
         raise ModelFileError(f"{path}: the {name!r} model holds no fitted weights")
     raw = bool(torch.allclose(model.output_scale, _RAW_SCALES))
@@ -200,7 +247,7 @@ def to_model(network: Network, **params):
     """A fitted `nbrdf` / `naive_mlp` model holding these weights (params: constructor overrides)."""
     from .nbrdf import NaiveMLP, NBRDF
 
-    cls = NBRDF if network.features == "rusinkiewicz" else NaiveMLP
+    cls = NBRDF if check_features(network.features) == "rusinkiewicz" else NaiveMLP
     model = cls(**{**params, "hidden": network.hidden, "raw_units": network.raw_units})
     model.weights = {k: v.clone() for k, v in network.weights.items()}
     return model

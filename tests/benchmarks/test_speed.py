@@ -40,7 +40,7 @@ def _fitted(name, **params):
     return model.fit(reference_material())
 
 
-@pytest.mark.parametrize("name", ["merl", "lambert", "cook_torrance", "ggx", "blinn_phong", "pca"])
+@pytest.mark.parametrize("name", ["merl", "lambert", "cook_torrance", "ggx", "blinn_phong", "pca", "nbrdf", "naive_mlp"])
 def test_representation_eval(benchmark, pairs, name):
     benchmark(_fitted(name).eval, *pairs)
 

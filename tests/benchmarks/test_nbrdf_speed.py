@@ -1,0 +1,96 @@
+"""NBRDF fitting speed: the batched fitter against one material at a time, same network and loss.
+
+    python -m pytest tests/benchmarks/test_nbrdf_speed.py --benchmark-enable            # CI size
+    python -m pytest tests/benchmarks/test_nbrdf_speed.py --benchmark-enable -m slow    # the full comparison
+
+Each benchmark records `per_material_s` (the call's time over its material count) and the
+final training losses in its extra_info. The CI-size cases use a short recipe on four small
+synthetic materials; the slow ones fit 16 published MERL networks' tables (or synthetic
+materials where the release is absent) with the default recipe, and the published reference
+recipe on alum-bronze for the loss it reaches.
+"""
+
+from __future__ import annotations
+
+import statistics
+
+import pytest
+import torch
+
+from brdfbench.data.nbrdf_release import find_release_dir, nbrdf_release_dataset
+from brdfbench.data.synthetic import synthetic_dataset
+from brdfbench_representations import mlp
+from brdfbench_representations.nbrdf import NBRDF
+from brdfbench_representations.nbrdf_fit import REFERENCE_RECIPE, Recipe, draw_samples, fit_batched
+
+SHORT = Recipe(epochs=3, n_samples=100_000, patience=None)
+FULL_MATERIALS = 16
+
+
+def _inits(n, hidden=(21, 21)):
+    return [mlp.glorot_init(hidden, torch.Generator().manual_seed(i)) for i in range(n)]
+
+
+def _fit(tables, recipe, batched, samples):
+    inits = _inits(len(tables))
+    if batched:
+        return fit_batched(tables, inits, recipe=recipe, samples=samples)
+    return [fit_batched([t], [w], recipe=recipe, samples=samples)[0] for t, w in zip(tables, inits)]
+
+
+def _record(benchmark, outcomes, n):
+    losses = [o.loss for o in outcomes]
+    benchmark.extra_info.update(
+        materials=n, median_loss=statistics.median(losses), max_loss=max(losses),
+        epochs=[o.epochs for o in outcomes],
+    )
+    if benchmark.stats is not None:  # absent under --benchmark-disable
+        benchmark.extra_info["per_material_s"] = benchmark.stats.stats.mean / n
+
+
+@pytest.fixture(scope="module")
+def small_tables(synthetic_cache):
+    ds = synthetic_dataset("small", seed=0, cache_dir=str(synthetic_cache))
+    return [ds.load(name).table for name in ds.materials[:4]]
+
+
+@pytest.mark.parametrize("mode", ["batched", "looped"])
+def test_fit_short_recipe(benchmark, small_tables, mode):
+    samples = draw_samples(SHORT.n_samples, "rusinkiewicz", seed=0)
+    outcomes = benchmark.pedantic(_fit, args=(small_tables, SHORT, mode == "batched", samples), rounds=1, iterations=1)
+    _record(benchmark, outcomes, len(small_tables))
+
+
+@pytest.fixture(scope="module")
+def full_targets(synthetic_cache):
+    root = find_release_dir()
+    if root is not None:
+        ds = nbrdf_release_dataset(str(root), limit=FULL_MATERIALS)
+    else:
+        ds = synthetic_dataset("default", seed=0, cache_dir=str(synthetic_cache))
+    return [ds.load(name) for name in ds.materials[:FULL_MATERIALS]]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mode", ["batched", "looped"])
+def test_fit_default_recipe(benchmark, full_targets, mode):
+    """Per-material time of the default recipe, 16 materials in one stack against 16 one-by-one fits."""
+    recipe = Recipe()
+    samples = draw_samples(recipe.n_samples, "rusinkiewicz", seed=0)
+    tables = [t.table for t in full_targets]
+    outcomes = benchmark.pedantic(_fit, args=(tables, recipe, mode == "batched", samples), rounds=1, iterations=1)
+    _record(benchmark, outcomes, len(tables))
+    benchmark.extra_info["losses"] = {t.name: round(o.loss, 6) for t, o in zip(full_targets, outcomes)}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("recipe_name", ["default", "reference"])
+def test_fit_one_material_by_recipe(benchmark, full_targets, recipe_name):
+    """One material alone: the published reference recipe (~50-90 s) against the default recipe."""
+    recipe = REFERENCE_RECIPE if recipe_name == "reference" else Recipe()
+    target = full_targets[0]
+    model = NBRDF()
+    init = model._random_init(target, 0)
+    outcomes = benchmark.pedantic(lambda: fit_batched([target.table], [init], recipe=recipe), rounds=1, iterations=1)
+    _record(benchmark, outcomes, 1)
+    benchmark.extra_info["material"] = target.name
