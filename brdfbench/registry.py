@@ -12,7 +12,7 @@ from functools import lru_cache
 from importlib.metadata import EntryPoint, entry_points
 
 from .errors import PluginError
-from .specs import DatasetSpec, GeneratorSpec, MetricSpec, PluginSpec, RepresentationSpec, SceneSpec
+from .specs import DatasetSpec, GeneratorSpec, MetricSpec, PluginSpec, RepresentationSpec, SamplerSpec, SceneSpec
 
 GROUPS: dict[str, type[PluginSpec]] = {
     "representations": RepresentationSpec,
@@ -20,6 +20,7 @@ GROUPS: dict[str, type[PluginSpec]] = {
     "metrics": MetricSpec,
     "datasets": DatasetSpec,
     "scenes": SceneSpec,
+    "samplers": SamplerSpec,
 }
 
 _extra: dict[str, dict[str, PluginSpec]] = {g: {} for g in GROUPS}

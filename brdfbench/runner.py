@@ -150,10 +150,9 @@ def run(cfg: RunConfig) -> dict[str, int]:
                     t0 = time.perf_counter()
                     if trained is not None:
                         models = [trained.fit(materials[0], seed=cfg.seed)]
-                    elif batch == 1:
-                        models = [rep_spec.create(**cfg.representation_params).fit(materials[0], seed=cfg.seed)]
-                    else:
-                        models = fitter.fit_many(materials, seed=cfg.seed, progress=f"fitting {len(chunk)} materials")
+                    else:  # one fitter per job: state such as a shared initialisation carries across batches
+                        progress = f"fitting {len(chunk)} materials" if batch > 1 else False
+                        models = fitter.fit_many(materials, seed=cfg.seed, progress=progress)
                     fit_s = (time.perf_counter() - t0) / len(chunk)  # amortised over the batch
                     if len(models) != len(chunk):
                         raise RuntimeError(f"fit_many returned {len(models)} models for {len(chunk)} materials")

@@ -72,3 +72,11 @@ class MetricSpec(PluginSpec):
 @dataclass(frozen=True)
 class SceneSpec(PluginSpec):
     """A scene: what it contains decides which simulator evaluates it."""
+
+
+@dataclass(frozen=True)
+class SamplerSpec(PluginSpec):
+    """An importance sampler; `target` is a `brdfbench.sampling.Sampler` subclass."""
+
+    def create(self, **params: Any):
+        return self.load()(**params)

@@ -26,3 +26,25 @@ HDR_MAE = MetricSpec(
     target="brdfbench_metrics.base:HDRMAE", unit="1/sr", higher_is_better=False,
     tags=frozenset({"brdf_space", "random_pairs"}),
 )
+
+# Image metrics (domain "image"): scored on rendered images, never on BRDF values. "ldr":
+# both images tone-mapped (2^exposure, clamp, sRGB curve); "hdr": linear radiance.
+_IMAGE = frozenset({"image"})
+
+
+def _image(name: str, description: str, cls: str, unit: str, higher_is_better: bool) -> MetricSpec:
+    return MetricSpec(name=name, description=description, target=f"brdfbench_metrics.image:{cls}", unit=unit,
+                      higher_is_better=higher_is_better, tags=_IMAGE)
+
+
+MSE_LDR = _image("mse_ldr", "Image MSE of tone-mapped (sRGB, [0, 1]) images", "MSELDR", "1", False)
+MSE_HDR = _image("mse_hdr", "Image MSE of linear radiance", "MSEHDR", "radiance²", False)
+RMSE_LDR = _image("rmse_ldr", "Image RMSE of tone-mapped (sRGB, [0, 1]) images", "RMSELDR", "1", False)
+RMSE_HDR = _image("rmse_hdr", "Image RMSE of linear radiance", "RMSEHDR", "radiance", False)
+PSNR_LDR = _image("psnr_ldr", "PSNR of tone-mapped images, data range 1, capped at 100 dB", "PSNRLDR", "dB", True)
+PSNR_HDR = _image("psnr_hdr", "PSNR of linear radiance, data range = target's max, capped at 100 dB", "PSNRHDR",
+                  "dB", True)
+SSIM_LDR = _image("ssim_ldr", "SSIM (Wang et al. 2004) of tone-mapped images, per RGB channel", "SSIMLDR", "1", True)
+SSIM_HDR = _image("ssim_hdr", "SSIM of log(1 + radiance), per RGB channel", "SSIMHDR", "1", True)
+FLIP_LDR = _image("flip_ldr", "Mean LDR-FLIP error of tone-mapped images (67 pixels/degree)", "FLIPLDR", "1", False)
+FLIP_HDR = _image("flip_hdr", "Mean HDR-FLIP error of linear radiance (67 pixels/degree)", "FLIPHDR", "1", False)

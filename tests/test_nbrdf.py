@@ -228,13 +228,16 @@ def test_fit_many_equals_fit(small_dataset):
         assert model.fit_info["fitted_to"] == m.name and model.fit_info["epochs"] == TINY.epochs
 
 
-def test_shared_initialisation_starts_everyone_from_the_first_fit(small_dataset):
+@pytest.mark.parametrize("batch_materials", [1, 16])
+def test_shared_initialisation_starts_everyone_from_the_first_fit(small_dataset, batch_materials):
     a, b, c = _materials(small_dataset)
-    models = NBRDF(**TINY_PARAMS, init="shared").fit_many([a, b, c], seed=0)
+    fitter = NBRDF(**TINY_PARAMS, init="shared", batch_materials=batch_materials)
+    models = fitter.fit_many([a, b], seed=0) + fitter.fit_many([c], seed=0)  # the anchor outlives a call
     first = NBRDF(**TINY_PARAMS).fit(a, seed=0)
     _assert_weights_close(models[0].weights, first.weights, rtol=0, atol=0)
-    from_first = fit_batched([b.table], [first.weights], recipe=TINY)[0]
-    _assert_weights_close(models[1].weights, from_first.weights, rtol=1e-4, atol=1e-5)
+    for later, model in ((b, models[1]), (c, models[2])):
+        from_first = fit_batched([later.table], [first.weights], recipe=TINY)[0]
+        _assert_weights_close(model.weights, from_first.weights, rtol=1e-4, atol=1e-5)
 
 
 def test_initialisation_from_a_file(small_dataset, tmp_path):

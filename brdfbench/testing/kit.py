@@ -15,6 +15,7 @@ from .. import modelio, registry
 from ..protocol import Material, Representation
 from ..specs import RepresentationSpec
 from .adversarial import adversarial_pairs
+from .checks import CheckSet
 
 DTYPES = (torch.float32, torch.float64)
 DEFAULT_PAIRS = 10**6
@@ -69,17 +70,8 @@ class Context:
 
 # --------------------------------------------------------------------------- checks
 
-CHECKS: dict[str, tuple[frozenset[str], Callable[[Context], None]]] = {}
-
-
-def check(*requires: str):
-    """Register a check that runs when the spec has all `requires` tags."""
-
-    def deco(fn):
-        CHECKS[fn.__name__.removeprefix("check_")] = (frozenset(requires), fn)
-        return fn
-
-    return deco
+CHECKS: CheckSet[Context] = CheckSet()
+check = CHECKS.register
 
 
 @check()
@@ -229,6 +221,22 @@ class ConformanceReport:
         lines.append(", ".join(f"{v} {k}" for k, v in counts.items() if v) or "no checks ran")
         return "\n".join(lines)
 
+    def run(self, check: Check, skip: tuple[type[BaseException], ...] = ()) -> None:
+        """Run one check and record its outcome; an exception of a `skip` type marks it skipped."""
+        try:
+            check()
+        except skip as exc:
+            self.outcomes[check.name] = "skipped"
+            self.details[check.name] = f"not resolvable: {exc}"
+        except Exception as exc:  # noqa: BLE001 - a check reports any fault of the plugin
+            self.outcomes[check.name] = "xfailed" if check.xfail_reason else "failed"
+            detail = str(exc) if isinstance(exc, AssertionError) else "".join(traceback.format_exception_only(type(exc), exc))
+            self.details[check.name] = (f"expected: {check.xfail_reason}; " if check.xfail_reason else "") + detail.strip()
+        else:
+            self.outcomes[check.name] = "xpassed" if check.xfail_reason else "passed"
+            if check.xfail_reason:
+                self.details[check.name] = f"declared expected failure ({check.xfail_reason}) but it passed"
+
     def raise_on_failure(self) -> "ConformanceReport":
         if not self.passed:
             raise AssertionError(self.summary())
@@ -257,15 +265,6 @@ def check_representation(spec_or_name, *, params: dict | None = None, n_pairs: i
     spec = _resolve(spec_or_name)
     report = ConformanceReport(spec.name)
     for c in representation_checks(spec, params=params, n_pairs=n_pairs):
-        try:
-            c()
-        except Exception as exc:  # noqa: BLE001 - a check reports any fault of the plugin
-            report.outcomes[c.name] = "xfailed" if c.xfail_reason else "failed"
-            detail = str(exc) if isinstance(exc, AssertionError) else "".join(traceback.format_exception_only(type(exc), exc))
-            report.details[c.name] = (f"expected: {c.xfail_reason}; " if c.xfail_reason else "") + detail.strip()
-        else:
-            report.outcomes[c.name] = "xpassed" if c.xfail_reason else "passed"
-            if c.xfail_reason:
-                report.details[c.name] = f"declared expected failure ({c.xfail_reason}) but it passed"
+        report.run(c)
     return report
 

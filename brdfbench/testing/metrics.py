@@ -1,5 +1,8 @@
 """Conformance checks for metric plugins: declared direction and unit, best value on a
-perfect prediction, worse on a worse one, and chunking invariance of the streaming class."""
+perfect prediction, worse on a worse one, and chunking invariance of the streaming class.
+
+BRDF-space metrics are fed (N, 3) BRDF values; image metrics (`domain = "image"`) are fed
+a stack of HDR images (N, H, W, 3) whose radiance reaches past 1, so tone mapping clips."""
 
 from __future__ import annotations
 
@@ -17,6 +20,17 @@ def _data(n: int = 4096, seed: int = 0):
     return target, cos_i, noise
 
 
+def _images(n: int = 8, size: int = 24, seed: int = 0):
+    """Smooth HDR images with texture (radiance in [0, 1.5)) and a multiplicative noise field."""
+    g = torch.Generator().manual_seed(seed)
+    ramp = torch.linspace(0.1, 1.0, size, dtype=torch.float64)
+    albedo = torch.rand(n, 1, 1, 3, generator=g, dtype=torch.float64)
+    shade = (ramp[:, None] * ramp.flip(0)[None, :])[None, :, :, None] * albedo
+    target = 1.5 * (0.7 * shade + 0.3 * torch.rand(n, size, size, 3, generator=g, dtype=torch.float64))
+    noise = torch.rand(n, size, size, 3, generator=g, dtype=torch.float64)
+    return target, None, noise
+
+
 def check_metric(spec_or_name: MetricSpec | str) -> None:
     """Raise AssertionError naming the first fault of a metric plugin."""
     spec = spec_or_name if isinstance(spec_or_name, MetricSpec) else registry.get("metrics", spec_or_name)
@@ -24,13 +38,17 @@ def check_metric(spec_or_name: MetricSpec | str) -> None:
     metric = cls()
     assert metric.unit == spec.unit, f"{spec.name}: class unit {metric.unit!r} != spec unit {spec.unit!r}"
     assert metric.higher_is_better == spec.higher_is_better, f"{spec.name}: class and spec disagree on higher_is_better"
-    target, cos_i, noise = _data()
+    image = getattr(metric, "domain", None) == "image"
+    target, cos_i, noise = _images() if image else _data()
 
     def value(pred, chunks=1):
         m = cls()
         for part in range(chunks):
             s = slice(part * len(pred) // chunks, (part + 1) * len(pred) // chunks)
-            m.update(pred[s], target[s], cos_i[s])
+            if image:
+                m.update(pred[s], target[s])
+            else:
+                m.update(pred[s], target[s], cos_i[s])
         return m.compute()
 
     perfect, slightly, badly = value(target), value(target * (1 + 0.05 * noise)), value(target * (1 + 2 * noise))

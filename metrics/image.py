@@ -1,0 +1,108 @@
+"""Streaming image metrics: `update` with one image or a batch, `compute` = mean over images.
+
+Each concrete class fixes a metric and a space ("ldr" or "hdr", see `image_functional`), so
+the registry builds it without arguments and its unit is exact; keyword arguments are the
+functional metric's options, e.g. `PSNRHDR(data_range=4.0)` or `FLIPLDR(exposure=1.0)`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, ClassVar
+
+import torch
+
+from . import image_functional as IF
+from .base import Metric
+
+
+class ImageMetric(Metric):
+    """Mean over images of a per-image value; subclasses set `fn`, `space`, `unit`, `higher_is_better`."""
+
+    fn: ClassVar[Callable]
+    space: ClassVar[str]
+    domain: ClassVar[str] = "image"
+
+    def __init__(self, **options: Any):
+        if not hasattr(type(self), "space"):
+            raise TypeError(f"{type(self).__name__} has no space; use its LDR or HDR subclass")
+        self.options = options
+        super().__init__()
+
+    def update(self, pred: torch.Tensor, target: torch.Tensor) -> None:  # type: ignore[override]
+        """Add one image (H, W, 3) or a batch (N, H, W, 3) of images."""
+        values = type(self).fn(pred, target, space=self.space, reduction="none", **self.options)
+        values = values.reshape(-1)
+        self._sum += float(values.sum())
+        self._count += values.numel()
+
+
+class MSE(ImageMetric):
+    fn = staticmethod(IF.mse)
+
+
+class RMSE(ImageMetric):
+    fn = staticmethod(IF.rmse)
+
+
+class PSNR(ImageMetric):
+    fn = staticmethod(IF.psnr)
+    unit = "dB"
+    higher_is_better = True
+
+
+class SSIM(ImageMetric):
+    fn = staticmethod(IF.ssim)
+    unit = "1"
+    higher_is_better = True
+
+
+class FLIP(ImageMetric):
+    fn = staticmethod(IF.flip)
+    unit = "1"
+
+
+# The (metric, space) pairs, one registered spec each. LDR values are display code values in [0, 1]
+# (dimensionless); HDR values are radiance in the scene's units.
+
+class MSELDR(MSE):
+    space = "ldr"
+    unit = "1"
+
+
+class MSEHDR(MSE):
+    space = "hdr"
+    unit = "radiance²"
+
+
+class RMSELDR(RMSE):
+    space = "ldr"
+    unit = "1"
+
+
+class RMSEHDR(RMSE):
+    space = "hdr"
+    unit = "radiance"
+
+
+class PSNRLDR(PSNR):
+    space = "ldr"
+
+
+class PSNRHDR(PSNR):
+    space = "hdr"
+
+
+class SSIMLDR(SSIM):
+    space = "ldr"
+
+
+class SSIMHDR(SSIM):
+    space = "hdr"
+
+
+class FLIPLDR(FLIP):
+    space = "ldr"
+
+
+class FLIPHDR(FLIP):
+    space = "hdr"
