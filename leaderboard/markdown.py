@@ -10,6 +10,7 @@ import pandas as pd
 from . import tables
 
 COST_LABELS = {
+    "fit_loss": "own fit loss",
     "fit_time": "fit time (s) ↓",
     "fit_batch": "materials per fit",
     "train_time": "train time (s) ↓",

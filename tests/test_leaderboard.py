@@ -41,3 +41,17 @@ def test_failures_listed_only_while_unresolved():
 
 def test_empty_store():
     assert "empty" in markdown.render(pd.DataFrame(columns=_df().columns), "s")
+
+
+def test_own_fit_loss_is_shown_but_never_ranked():
+    df = _df()
+    losses = df[df.metric == "fit_time"].assign(metric="fit_loss", value=0.003, unit="objective")
+    text = markdown.render(pd.concat([df, losses], ignore_index=True), "store.sqlite")
+    assert "own fit loss" in text and "0.003" in text
+    assert "#### `fit_loss`" not in text  # no per-metric ranking of incomparable objectives
+
+
+def test_nbrdf_release_section_says_refitting_favours_nbrdf():
+    text = markdown.render(_df().assign(dataset="nbrdf_release"), "store.sqlite")
+    assert "favours `nbrdf`" in text
+    assert "favours" not in markdown.render(_df(), "store.sqlite")
