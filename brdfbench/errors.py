@@ -19,3 +19,7 @@ class PluginError(BrdfbenchError):
 
 class ConfigError(BrdfbenchError):
     """A configuration value is invalid."""
+
+
+class RenderError(BrdfbenchError):
+    """A render produced non-finite values, or a scene/environment map is unusable."""

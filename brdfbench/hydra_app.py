@@ -26,6 +26,7 @@ def to_run_config(cfg: DictConfig) -> RunConfig:
     rep = _section(cfg, "representation")
     ds = _section(cfg, "dataset")
     harness = _section(cfg, "harness")
+    scene = _section(cfg, "scene")
     for key, section in (("representation", rep), ("dataset", ds)):
         if "name" not in section:
             raise ConfigError(f"config key {key}.name is missing")
@@ -34,6 +35,8 @@ def to_run_config(cfg: DictConfig) -> RunConfig:
         if key not in known:
             raise ConfigError(f"unknown config key harness.{key}; known: {', '.join(sorted(known))}")
     harness["metrics"] = tuple(harness.get("metrics", HarnessConfig.metrics))
+    if isinstance(harness.get("sampler_params"), dict):  # a harness yaml may declare sampler keys as null: unset
+        harness["sampler_params"] = {k: v for k, v in harness["sampler_params"].items() if v is not None}
     materials = cfg.get("materials")
     return RunConfig(
         representation=rep["name"],
@@ -42,7 +45,8 @@ def to_run_config(cfg: DictConfig) -> RunConfig:
         dataset=ds["name"],
         dataset_params=ds.get("params") or {},
         harness=HarnessConfig(**harness),
-        scene=_section(cfg, "scene").get("name", "brdf_space"),
+        scene=scene.get("name", "brdf_space"),
+        scene_params=scene.get("params") or {},
         materials=tuple(materials) if materials else None,
         limit=cfg.get("limit"),
         seed=int(cfg.seed),
@@ -69,6 +73,9 @@ def _app(cfg: DictConfig) -> None:
 
 
 def run_hydra(argv: list[str]) -> int:
-    sys.argv = ["brdfbench", *argv]
+    # Hydra's parser takes flags only before the overrides; accept `-m` anywhere, as in
+    # `brdfbench harness=render scene=sphere_envmap -m representation=merl,nbrdf`.
+    flags = [a for a in argv if a in ("-m", "--multirun")]
+    sys.argv = ["brdfbench", *flags, *(a for a in argv if a not in flags)]
     _app()
     return 0

@@ -1,7 +1,8 @@
 """The BRDF representation protocol every representation plugin implements.
 
 A representation evaluates RGB BRDF values (N, 3), not cosine-weighted, in MERL units
-(1/sr), on unit direction pairs (N, 3) in the local shading frame (z = normal). Pairs
+(1/sr), on unit direction pairs (N, 3) in the local shading frame (z = normal): ωi points
+toward the light, ωo toward the viewer (MERL's θin / θout), both away from the surface. Pairs
 with either direction at or below the horizon evaluate to 0. The output dtype follows
 the input dtype (fp32 or fp64).
 

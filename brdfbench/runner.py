@@ -20,7 +20,7 @@ import torch
 from tqdm.auto import tqdm
 
 from . import __version__, modelio, registry
-from .errors import BrdfbenchError, ConfigError
+from .errors import BrdfbenchError, ConfigError, RenderError
 from .harness import Measurement
 from .harness.accuracy import evaluate_accuracy
 from .harness.cost import evaluation_throughput, model_size
@@ -34,14 +34,35 @@ log = logging.getLogger(__name__)
 DTYPES = {"float32": torch.float32, "float64": torch.float64}
 
 
+#: Metric domains each harness kind takes from `harness.metrics`. A convergence harness takes
+#: none (the list must be empty): it always measures its own per-spp errors and timings.
+HARNESS_KINDS = {"accuracy": ("merl_grid", "random_pairs"), "render": ("image",), "convergence": ()}
+RENDERED_KINDS = ("render", "convergence")
+#: Fields read only by the convergence harness: left out of other kinds' config hash, so
+#: adding them did not invalidate cells already in a store.
+CONVERGENCE_FIELDS = ("spp_ladder", "reference_spp")
+
+
 @dataclass(frozen=True)
 class HarnessConfig:
+    kind: str = "accuracy"  # accuracy: BRDF-space metrics; render: image metrics; convergence: error vs spp
     metrics: tuple[str, ...] = ("l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae")
     n_random: int = 2**20
     dtype: str = "float32"
     throughput_batch: int = 2**16
     timeout_s: float | None = 600.0
     folds: int = 4  # cross-validation folds for representations that train on a split
+    # rendering (kind: render)
+    simulator: str | None = None  # None: the cheapest exact one for the scene
+    backend: str | None = None  # mitsuba (JIT) or torch; None: mitsuba where LLVM >= 19 loads
+    sampler: str = "cosine"  # BRDF importance sampler of Monte Carlo simulators
+    sampler_params: dict[str, Any] = field(default_factory=dict)
+    spp: int | None = None  # samples per pixel; None: the scene's
+    exposure: float = 0.0  # stops, for tone-mapped (LDR) metrics and PNGs
+    save_images: bool = True
+    # Monte Carlo convergence (kind: convergence; `metrics` must be empty, `spp` null)
+    spp_ladder: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)  # spp of the rungs, strictly increasing
+    reference_spp: int = 1024  # spp of the model's own reference render; above the ladder
 
 
 @dataclass(frozen=True)
@@ -53,6 +74,7 @@ class RunConfig:
     dataset_params: dict[str, Any]
     harness: HarnessConfig = field(default_factory=HarnessConfig)
     scene: str = "brdf_space"
+    scene_params: dict[str, Any] = field(default_factory=dict)
     materials: tuple[str, ...] | None = None
     limit: int | None = None
     seed: int = 0
@@ -80,10 +102,10 @@ def run(cfg: RunConfig) -> dict[str, int]:
     rep_spec = registry.get("representations", cfg.representation)
     rep_cls = rep_spec.load()
     _check_params(rep_cls, cfg.representation_params, "representation.params")
-    scene = registry.get("scenes", cfg.scene).load()()
-    if scene.needs_rendering:
-        raise ConfigError(f"scene {cfg.scene!r} needs rendering, which this harness does not do; use scene=brdf_space")
-    metric_specs = [registry.get("metrics", m) for m in cfg.harness.metrics]
+    scene_factory = registry.get("scenes", cfg.scene).load()
+    _check_params(scene_factory, cfg.scene_params, "scene.params")
+    scene = scene_factory(**cfg.scene_params)
+    metric_specs = _metric_specs(cfg.harness, scene)
     if cfg.harness.dtype not in DTYPES:
         raise ConfigError(f"harness.dtype {cfg.harness.dtype!r} must be one of {', '.join(DTYPES)}")
     dtype = DTYPES[cfg.harness.dtype]
@@ -95,8 +117,11 @@ def run(cfg: RunConfig) -> dict[str, int]:
     store = ResultsStore(cfg.store_path)
     chash = config_hash({
         "representation": cfg.representation, "params": cfg.representation_params,
-        "harness": cfg.harness.__dict__, "seed": cfg.seed,
+        "harness": _hashed_harness(cfg.harness), "seed": cfg.seed,
+        **({"scene": cfg.scene, "scene_params": cfg.scene_params} if scene.needs_rendering else {}),
     })
+    measure = _measurer(cfg, scene, metric_specs, dtype, dataset.fingerprint)
+    scene_label = _scene_label(cfg)
     run_id = uuid.uuid4().hex[:12]
     counts = {"done": 0, "skipped": 0, "failed": 0}
 
@@ -106,7 +131,7 @@ def run(cfg: RunConfig) -> dict[str, int]:
             material=material, category=category, metric=m.metric if m else "error",
             value=m.value if m else None, unit=m.unit if m else "", higher_is_better=m.higher_is_better if m else False,
             status=status, message=message, seed=cfg.seed, config_hash=chash, package_version=__version__,
-            git_sha=git_sha(), timestamp=now(),
+            git_sha=git_sha(), timestamp=now(), scene=scene_label,
         )
 
     fitter = None
@@ -170,19 +195,20 @@ def run(cfg: RunConfig) -> dict[str, int]:
             for name, material, model in zip(chunk, materials, models):
                 try:
                     with time_limit(cfg.harness.timeout_s, f"{cfg.label} on {name}"):
-                        measurements = evaluate_accuracy(
-                            model, material, metric_specs, n_random=cfg.harness.n_random, seed=cfg.seed, dtype=dtype,
-                        )
+                        measurements = measure(model, material)
                         measurements.append(Measurement("fit_time", fit_s, "s", False))
                         measurements.extend(fit_extra)
                         fit_loss = model.metadata().get(FIT_LOSS_KEY)
                         if isinstance(fit_loss, (int, float)):
                             measurements.append(Measurement("fit_loss", float(fit_loss), "objective", False))
                         measurements.extend(extra)
-                        measurements.append(evaluation_throughput(model, batch=cfg.harness.throughput_batch, seed=cfg.seed, dtype=dtype))
                         measurements.extend(model_size(model))
                         if cfg.save_models:
                             modelio.save(model, cfg.representation, cfg.results_dir / "models" / dataset.fingerprint / cfg.label / f"{name}.safetensors")
+                except RenderError as exc:  # the plugin's fault (non-finite values), named with its material
+                    log.warning("%s", str(exc))
+                    store.write_cell([row(name, material.category, None, "failed", str(exc))])
+                    counts["failed"] += 1
                 except BrdfbenchError:
                     raise
                 except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
@@ -197,6 +223,87 @@ def run(cfg: RunConfig) -> dict[str, int]:
                 bar.update(1)
     bar.close()
     return counts
+
+
+def _metric_specs(harness: HarnessConfig, scene) -> list:
+    """The harness's metric specs, checked against its kind and the scene before any work."""
+    if harness.kind not in HARNESS_KINDS:
+        raise ConfigError(f"harness.kind {harness.kind!r} must be one of {', '.join(HARNESS_KINDS)}")
+    if scene.needs_rendering and harness.kind not in RENDERED_KINDS:
+        raise ConfigError(f"scene {scene.name!r} is rendered: use harness=render (image metrics) or scene=brdf_space")
+    if not scene.needs_rendering and harness.kind in RENDERED_KINDS:
+        raise ConfigError(f"harness={harness.kind} needs a rendered scene (scene=sphere_directional, sphere_envmap, "
+                          f"spheres_on_plane); scene {scene.name!r} is not rendered")
+    if harness.kind == "convergence":
+        from .harness.convergence import check_config
+
+        check_config(harness, scene)
+    specs = [registry.get("metrics", m) for m in harness.metrics]
+    allowed = HARNESS_KINDS[harness.kind]
+    for spec in specs:
+        domain = getattr(spec.load(), "domain", None)
+        if domain not in allowed:
+            raise ConfigError(f"harness.metrics: {spec.name!r} is measured on {domain!r}, but a {harness.kind} "
+                              f"harness measures on {', '.join(allowed)}")
+    return specs
+
+
+def _measurer(cfg: RunConfig, scene, metric_specs: list, dtype: torch.dtype, fingerprint: str):
+    """The per-(model, material) measurement of this job's harness kind."""
+    if cfg.harness.kind == "convergence":
+        return _convergence_measurer(cfg, scene, dtype, fingerprint)
+    if cfg.harness.kind == "render":
+        from .harness.render import RenderHarness
+        from .render.simulate import build_simulator
+
+        h = cfg.harness
+        simulator = build_simulator(scene, name=h.simulator, sampler=h.sampler, sampler_params=h.sampler_params,
+                                    spp=h.spp, dtype=dtype, backend=h.backend)
+        harness = RenderHarness(
+            simulator, metric_specs, out_dir=cfg.results_dir / "renders" / scene.name, dataset_fingerprint=fingerprint,
+            seed=cfg.seed, exposure=h.exposure, save_images=h.save_images,
+            key={"scene": cfg.scene, "scene_params": cfg.scene_params, "simulator": simulator.name, "backend": simulator.backend,
+                 "sampler": h.sampler, "sampler_params": h.sampler_params, "spp": h.spp, "dtype": h.dtype},
+        )
+        return lambda model, material: harness.measure(model, material, cfg.label)
+
+    def accuracy(model, material):
+        out = evaluate_accuracy(model, material, metric_specs, n_random=cfg.harness.n_random, seed=cfg.seed, dtype=dtype)
+        return out + [evaluation_throughput(model, batch=cfg.harness.throughput_batch, seed=cfg.seed, dtype=dtype)]
+
+    return accuracy
+
+
+def _convergence_measurer(cfg: RunConfig, scene, dtype: torch.dtype, fingerprint: str):
+    """Error against the model's own high-spp render along the spp ladder (harness.convergence)."""
+    from .harness.convergence import ConvergenceHarness
+    from .render.simulate import build_simulator
+
+    h = cfg.harness
+    build = lambda spp: build_simulator(scene, name=h.simulator, sampler=h.sampler,  # noqa: E731
+                                        sampler_params=h.sampler_params, spp=spp, dtype=dtype, backend=h.backend)
+    harness = ConvergenceHarness(
+        build, h.spp_ladder, h.reference_spp, out_dir=cfg.results_dir / "renders" / scene.name / "convergence",
+        dataset_fingerprint=fingerprint, seed=cfg.seed, exposure=h.exposure, save_images=h.save_images,
+        key={"scene": cfg.scene, "scene_params": cfg.scene_params, "sampler": h.sampler,
+             "sampler_params": h.sampler_params, "dtype": h.dtype,
+             "representation": cfg.representation, "params": cfg.representation_params},
+    )
+    return lambda model, material: harness.measure(model, material, cfg.label)
+
+
+def _scene_label(cfg: RunConfig) -> str:
+    """The store's scene column: the scene, or for convergence rows "<scene>/convergence/<sampler>"."""
+    if cfg.harness.kind != "convergence":
+        return cfg.scene
+    from .harness.convergence import scene_label
+
+    return scene_label(cfg.scene, cfg.harness.sampler, cfg.harness.sampler_params)
+
+
+def _hashed_harness(harness: HarnessConfig) -> dict[str, Any]:
+    """The harness fields in the config hash: convergence-only fields only for that kind."""
+    return {k: v for k, v in harness.__dict__.items() if harness.kind == "convergence" or k not in CONVERGENCE_FIELDS}
 
 
 def plan_folds(materials: tuple[str, ...], needs_training: bool, folds: int, seed: int) -> list[tuple[list[str] | None, list[str]]]:

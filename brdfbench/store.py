@@ -33,7 +33,8 @@ CREATE TABLE IF NOT EXISTS results (
     config_hash TEXT NOT NULL,
     package_version TEXT NOT NULL,
     git_sha TEXT NOT NULL,
-    timestamp REAL NOT NULL
+    timestamp REAL NOT NULL,
+    scene TEXT NOT NULL DEFAULT 'brdf_space'
 );
 CREATE INDEX IF NOT EXISTS cell ON results (representation, config_hash, dataset_fingerprint, material);
 """
@@ -58,6 +59,7 @@ class Row:
     package_version: str
     git_sha: str
     timestamp: float
+    scene: str = "brdf_space"  # the scene the metrics were measured in (brdf_space: no rendering)
 
 
 COLUMNS = [f.name for f in fields(Row)]
@@ -69,6 +71,9 @@ class ResultsStore:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         with closing(self._connect()) as con, con:
             con.executescript(SCHEMA)
+            have = {row[1] for row in con.execute("PRAGMA table_info(results)")}
+            if "scene" not in have:  # a store written before scenes were rendered
+                con.execute("ALTER TABLE results ADD COLUMN scene TEXT NOT NULL DEFAULT 'brdf_space'")
 
     def _connect(self) -> sqlite3.Connection:
         con = sqlite3.connect(self.path, timeout=120)

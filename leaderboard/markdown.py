@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Collection
 
 import pandas as pd
 
+from . import plots as plots_module
 from . import tables
 
 COST_LABELS = {
@@ -18,6 +20,8 @@ COST_LABELS = {
     "model_bytes": "bytes/material ↓",
     "shared_bytes": "shared bytes ↓",
     "flops_per_eval": "FLOP/eval ↓",
+    "render_time": "render time (s) ↓",
+    "render_samples_per_s": "render samples/s ↑",
 }
 
 
@@ -51,10 +55,14 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
     return lines
 
 
-def dataset_section(name: str, fingerprint: str, df: pd.DataFrame) -> list[str]:
+def dataset_section(name: str, fingerprint: str, df: pd.DataFrame, scene: str = "brdf_space") -> list[str]:
     summary = tables.summarize(df)
     n_materials = df["material"].nunique()
-    lines = [f"## Dataset `{name}`", "", f"{n_materials} materials, fingerprint `{fingerprint}`.", ""]
+    heading = f"## Dataset `{name}`" + ("" if scene == "brdf_space" else f", rendered scene `{scene}`")
+    lines = [heading, "", f"{n_materials} materials, fingerprint `{fingerprint}`.", ""]
+    if scene != "brdf_space":
+        lines += ["> Image metrics compare each representation's render with the render of the material's own "
+                  "table (nearest-cell lookup) through the same simulator and random numbers.", ""]
     if name in DATASET_NOTES:
         lines += [f"> {DATASET_NOTES[name]}", ""]
     primary = tables.primary_metric(summary)
@@ -100,20 +108,65 @@ def dataset_section(name: str, fingerprint: str, df: pd.DataFrame) -> list[str]:
                  for i, x in enumerate(r.itertuples(), 1)],
             )
             lines.append("")
+    return lines + _failures(df)
+
+
+def convergence_section(name: str, fingerprint: str, df: pd.DataFrame, scene: str,
+                        plots: Collection[str] = ()) -> list[str]:
+    """Mean RMSE per spp rung per representation for one (dataset, scene/convergence/sampler)."""
+    base, sampler = tables.split_convergence(scene)
+    lines = [f"## Dataset `{name}`, convergence on `{base}`, sampler `{sampler}`", "",
+             f"{df['material'].nunique()} materials, fingerprint `{fingerprint}`.", "",
+             "> Monte Carlo noise only: each representation's render at n spp against its own high-spp render "
+             "(same model, independent random numbers), so the error measures how well the sampler suits the "
+             "representation. Columns: mean RMSE of HDR radiance over materials (↓); the slope of log RMSE on "
+             "log spp (−0.5 for an unbiased estimator; flatter when rare fireflies dominate); the RMSE at 1 spp "
+             "implied by the 1/√spp law over all rungs (↓); the mean render time at the top rung.", ""]
+    rungs = tables.convergence_rungs(df)
+    rmse = rungs[rungs.base == "rmse_hdr"]
+    if rmse.empty:
+        lines += ["No successful results yet.", ""]
+    else:
+        summary = tables.summarize(df)
+        lookup = {(r.representation, r.metric): r for r in summary.itertuples()}
+        ladder = sorted(set(rmse.spp))
+        top = ladder[-1]
+        means = {(r.representation, r.spp): r for r in rmse.itertuples()}
+        order = sorted(set(rmse.representation), key=lambda rep: getattr(lookup.get((rep, "convergence_rmse_1spp")),
+                                                                      "mean", math.inf))
+        header = ["representation", *[f"{n} spp" for n in ladder], "slope", "RMSE at 1 spp (fit) ↓",
+                  f"render time at {top} spp (s) ↓", "materials"]
+        rows = []
+        for rep in order:
+            cells = [f"`{rep}`", *[fmt(means[(rep, n)].mean) if (rep, n) in means else "–" for n in ladder]]
+            for metric in ("convergence_slope", "convergence_rmse_1spp", f"render_time@spp={top}"):
+                cells.append(fmt(lookup[(rep, metric)].mean) if (rep, metric) in lookup else "–")
+            cells.append(str(max(r.n for (name, _), r in means.items() if name == rep)))
+            rows.append(cells)
+        lines += ["### Error against spp", "", *_table(header, rows), ""]
+    plot = plots_module.convergence_plot_name(name, fingerprint, base)
+    if plot in plots:
+        lines += [f"![RMSE against spp and render time, every sampler on `{base}`]({plot})", ""]
+    return lines + _failures(df)
+
+
+def _failures(df: pd.DataFrame) -> list[str]:
+    """The unresolved failures of a section, or nothing."""
     failed = tables.failures(df)
-    if not failed.empty:
-        lines += ["### Failures", ""]
-        lines += _table(["representation", "material", "error"],
-                        [[f"`{f.representation}`", f.material, f.message.replace("|", "\\|")[:200]] for f in failed.itertuples()])
-        lines.append("")
-    return lines
+    if failed.empty:
+        return []
+    lines = ["### Failures", ""]
+    lines += _table(["representation", "material", "error"],
+                    [[f"`{f.representation}`", f.material, f.message.replace("|", "\\|")[:200]] for f in failed.itertuples()])
+    return lines + [""]
 
 
 def lookup_any(summary: pd.DataFrame, metric: str):
     return summary[summary.metric == metric].iloc[0]
 
 
-def render(df: pd.DataFrame, source: str) -> str:
+def render(df: pd.DataFrame, source: str, plots: Collection[str] = ()) -> str:
+    """The leaderboard text; `plots` names the figure files written beside it (linked from their sections)."""
     lines = [
         "# brdfbench leaderboard",
         "",
@@ -125,6 +178,11 @@ def render(df: pd.DataFrame, source: str) -> str:
     versions = ", ".join(sorted(set(df.package_version)))
     shas = ", ".join(sorted({s[:10] for s in df.git_sha}))
     lines += [f"brdfbench {versions}; git {shas}. Timings are from the machine that ran each cell.", ""]
-    for (name, fingerprint), group in df.groupby(["dataset", "dataset_fingerprint"], sort=True):
-        lines += dataset_section(name, fingerprint, group)
+    if "scene" not in df.columns:
+        df = df.assign(scene="brdf_space")
+    for (name, fingerprint, scene), group in df.groupby(["dataset", "dataset_fingerprint", "scene"], sort=True):
+        if tables.is_convergence(scene):
+            lines += convergence_section(name, fingerprint, group, scene, plots)
+        else:
+            lines += dataset_section(name, fingerprint, group, scene)
     return "\n".join(lines)

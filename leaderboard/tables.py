@@ -5,7 +5,9 @@ from __future__ import annotations
 import pandas as pd
 
 #: Accuracy metric used to rank, first one present wins.
-PRIMARY_METRICS = ("l1_log_cos", "l1_log", "l1", "hdr_rmse")
+PRIMARY_METRICS = ("l1_log_cos", "l1_log", "l1", "hdr_rmse",
+                   # rendered scenes (each scene is its own section)
+                   "psnr_ldr", "ssim_ldr", "flip_ldr", "psnr_hdr", "ssim_hdr", "flip_hdr", "rmse_hdr", "rmse_ldr")
 #: Columns shown beside accuracy, with the aggregate that makes sense for each: costs, and a
 #: model's own final fit loss (each family's own objective: not comparable across families,
 #: so never ranked).
@@ -18,6 +20,8 @@ COST_METRICS = {
     "model_bytes": "median",
     "shared_bytes": "median",
     "flops_per_eval": "median",
+    "render_time": "mean",
+    "render_samples_per_s": "median",
 }
 
 
@@ -54,3 +58,29 @@ def ranking(summary: pd.DataFrame, metric: str) -> pd.DataFrame:
         return rows
     ascending = not bool(rows["higher_is_better"].iloc[0])
     return rows.sort_values("mean", ascending=ascending).reset_index(drop=True)
+
+
+# --------------------------------------------------------------------------- convergence
+
+#: The store's scene column of convergence rows: "<scene>/convergence/<sampler>".
+CONVERGENCE_INFIX = "/convergence/"
+#: Per-rung metric names: "<metric>@spp=<n>".
+_RUNG = r"^(?P<base>.+)@spp=(?P<spp>\d+)$"
+
+
+def is_convergence(scene: str) -> bool:
+    return CONVERGENCE_INFIX in scene
+
+
+def split_convergence(scene: str) -> tuple[str, str]:
+    """(scene, sampler label) of a convergence scene label."""
+    base, _, sampler = scene.partition(CONVERGENCE_INFIX)
+    return base, sampler
+
+
+def convergence_rungs(df: pd.DataFrame) -> pd.DataFrame:
+    """Per-rung means over materials: representation, base (metric), spp, mean, n, unit."""
+    summary = summarize(df)
+    parts = summary["metric"].str.extract(_RUNG)
+    rungs = summary.assign(base=parts["base"], spp=pd.to_numeric(parts["spp"])).dropna(subset=["base"])
+    return rungs.astype({"spp": int}).sort_values(["representation", "base", "spp"]).reset_index(drop=True)

@@ -38,6 +38,19 @@ def test_explicit_multirun_sweep(tmp_path):
     assert "`merl-trilinear`" in board and "`lambert`" in board and "`merl`" not in board
 
 
+def test_render_sweep_with_the_multirun_flag_among_the_overrides(tmp_path):
+    """The issue's command shape: `-m` after other overrides, image metrics per material."""
+    out = brdfbench("harness=render", "scene=sphere_envmap", "-m", "representation=merl,lambert",
+                    "dataset.params.size=small", "limit=1", "scene.params.width=16", "scene.params.height=16",
+                    "scene.params.spp=4", "harness.sampler=ggx", "harness.sampler_params.alpha=0.3",
+                    f"results_dir={tmp_path}/res", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    board = (tmp_path / "res" / "leaderboard.md").read_text()
+    assert "rendered scene `sphere_envmap`" in board and "psnr_ldr" in board and "flip_ldr" in board
+    assert "`merl`" in board and "`lambert`" in board
+    assert len(list((tmp_path / "res" / "renders").rglob("*.exr"))) == 3  # reference, merl, lambert
+
+
 def test_list_prints_one_line_per_plugin(tmp_path):
     out = brdfbench("list", cwd=tmp_path)
     assert out.returncode == 0

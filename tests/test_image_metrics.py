@@ -225,17 +225,19 @@ def test_image_metrics_are_registered_as_image_domain(name):
         metric.compute()
 
 
-def test_harness_configs_name_no_image_metric():
-    """The accuracy harness evaluates its configured metrics on BRDF values: none may be an image metric."""
+def test_harness_configs_name_metrics_of_their_kind():
+    """Accuracy harnesses evaluate on BRDF values (no image metric); the render harness on images only."""
     from omegaconf import OmegaConf
 
     from brdfbench.runner import HarnessConfig
 
-    configured = set(HarnessConfig.metrics)
+    by_kind: dict[str, set[str]] = {"accuracy": set(HarnessConfig.metrics)}
     for path in (REPO / "conf" / "harness").glob("*.yaml"):
-        configured |= set(OmegaConf.load(path).get("metrics", []))
-    assert configured
-    assert not [m for m in configured if "image" in registry.get("metrics", m).tags]
+        cfg = OmegaConf.load(path)
+        by_kind.setdefault(cfg.get("kind", "accuracy"), set()).update(cfg.get("metrics", []))
+    assert by_kind["accuracy"] and by_kind["render"]
+    assert not [m for m in by_kind["accuracy"] if "image" in registry.get("metrics", m).tags]
+    assert all("image" in registry.get("metrics", m).tags for m in by_kind["render"])
 
 
 def test_a_metric_class_needs_a_space():

@@ -11,7 +11,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brdfbench import registry
+from brdfbench import mitsuba_env, registry
 from brdfbench.errors import ConfigError
 from brdfbench.sampling import Sampler, cartesian_to_spherical, reflect, spherical_to_cartesian
 from brdfbench.sampling import chi2 as chi2_mod
@@ -250,7 +250,7 @@ def test_fp32_chi2_catches_cancellation_that_only_fp32_shows():
 @pytest.mark.parametrize("variant", ["scalar_rgb", "llvm_ad_rgb"])
 def test_both_backends_accept_a_sampler_and_reject_a_slip(variant):
     if variant == "llvm_ad_rgb" and chi2_mod.chi2_variant() != "llvm_ad_rgb":
-        pytest.skip(f"drjit does not load LLVM >= {chi2_mod.LLVM_MIN_MAJOR} here (llvm_version={chi2_mod.llvm_version()})")
+        pytest.skip(f"drjit does not load LLVM >= {chi2_mod.LLVM_MIN_MAJOR} here (llvm_version={mitsuba_env.llvm_version()})")
     import mitsuba as mi
 
     before = mi.variant()
@@ -264,11 +264,11 @@ def test_both_backends_accept_a_sampler_and_reject_a_slip(variant):
 
 def test_variant_choice_needs_llvm_19(monkeypatch):
     monkeypatch.delenv(chi2_mod.VARIANT_ENV, raising=False)
-    monkeypatch.setattr(chi2_mod, "llvm_version", lambda: (15, 0, 7))
+    monkeypatch.setattr(mitsuba_env, "llvm_version", lambda: (15, 0, 7))
     assert chi2_mod.chi2_variant() == "scalar_rgb"
-    monkeypatch.setattr(chi2_mod, "llvm_version", lambda: None)
+    monkeypatch.setattr(mitsuba_env, "llvm_version", lambda: None)
     assert chi2_mod.chi2_variant() == "scalar_rgb"
-    monkeypatch.setattr(chi2_mod, "llvm_version", lambda: (19, 1, 7))
+    monkeypatch.setattr(mitsuba_env, "llvm_version", lambda: (19, 1, 7))
     assert chi2_mod.chi2_variant() == "llvm_ad_rgb"
     monkeypatch.setenv(chi2_mod.VARIANT_ENV, "scalar_rgb")
     assert chi2_mod.chi2_variant() == "scalar_rgb"

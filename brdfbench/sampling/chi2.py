@@ -27,11 +27,7 @@ Mitsuba variant is restored after each test.
 from __future__ import annotations
 
 import contextlib
-import functools
 import math
-import os
-import subprocess
-import sys
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -39,17 +35,15 @@ import numpy as np
 import torch
 
 from . import Sampler
-from ..errors import ConfigError
+from .. import mitsuba_env
+from ..mitsuba_env import LLVM_MIN_MAJOR, LLVM_VARIANT, SCALAR_VARIANT, mitsuba_variant  # noqa: F401 (re-exported)
 from .charts import Chart, ChartChoice, chart_for
 from .cubature import DOMAIN_EXTENT, DOMAIN_LO, domain_shape, tabulate_expected
 
 Tensor = torch.Tensor
 
 SIGNIFICANCE = 0.01
-LLVM_MIN_MAJOR = 19
 VARIANT_ENV = "BRDFBENCH_CHI2_VARIANT"
-LLVM_VARIANT = "llvm_ad_rgb"
-SCALAR_VARIANT = "scalar_rgb"
 POOL_THRESHOLD = 5.0
 #: Largest quantum/width (see `ChartChoice`) at which a χ² test is meaningful: beyond it,
 #: samples sit on a lattice of the dtype whose aliasing against the cells, not the
@@ -88,37 +82,9 @@ class Chi2Result:
 # --------------------------------------------------------------------------- backend
 
 
-@functools.lru_cache(maxsize=1)
-def llvm_version() -> tuple[int, ...] | None:
-    """The libLLVM version drjit loads, probed in a subprocess (an unsupported one aborts it)."""
-    code = (
-        "import drjit as dr, mitsuba as mi\n"
-        f"mi.set_variant('{LLVM_VARIANT}')\n"
-        "x = dr.arange(mi.Float, 8) + 1.0\n"
-        "dr.eval(x)\n"
-        "print('.'.join(str(v) for v in dr.detail.llvm_version()))\n"
-    )
-    try:
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=180)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    if out.returncode != 0:
-        return None
-    try:
-        return tuple(int(p) for p in out.stdout.strip().splitlines()[-1].split("."))
-    except (ValueError, IndexError):
-        return None
-
-
 def chi2_variant() -> str:
     """`llvm_ad_rgb` where drjit loads LLVM ≥ 19, else `scalar_rgb`; BRDFBENCH_CHI2_VARIANT overrides."""
-    forced = os.environ.get(VARIANT_ENV)
-    if forced:
-        if forced not in (LLVM_VARIANT, SCALAR_VARIANT):
-            raise ConfigError(f"{VARIANT_ENV}={forced!r} must be {LLVM_VARIANT!r} or {SCALAR_VARIANT!r}")
-        return forced
-    version = llvm_version()
-    return LLVM_VARIANT if version is not None and version[0] >= LLVM_MIN_MAJOR else SCALAR_VARIANT
+    return mitsuba_env.choose_variant(VARIANT_ENV, warn=False)
 
 
 @contextlib.contextmanager
@@ -134,21 +100,6 @@ def torch_threads(n: int):
         yield
     finally:
         torch.set_num_threads(previous)
-
-
-@contextlib.contextmanager
-def mitsuba_variant(name: str):
-    """Set a Mitsuba variant for a block and restore the previous one."""
-    import mitsuba as mi
-
-    previous = mi.variant()
-    if previous != name:
-        mi.set_variant(name)
-    try:
-        yield mi
-    finally:
-        if previous is not None and previous != name:
-            mi.set_variant(previous)
 
 
 # --------------------------------------------------------------------------- the test
