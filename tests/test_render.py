@@ -284,3 +284,19 @@ def _lambert_model() -> Lambert:
     m = Lambert()
     m.albedo = torch.tensor([0.6, 0.5, 0.4], dtype=torch.float64)
     return m
+
+
+@needs_llvm
+@pytest.mark.parametrize("scene", [scenes.sphere_envmap(width=24, height=24, spp=8),
+                                   scenes.sphere_directional(width=24, height=24)], ids=["envmap", "directional"])
+def test_a_reused_scene_renders_what_a_fresh_one_renders(scene, small_dataset):
+    """The Mitsuba simulators keep the loaded scene and swap the model in: no other change."""
+    from brdfbench.harness.render import TableReference
+
+    table = TableReference(small_dataset.load(small_dataset.materials[0]))
+    warm = build_simulator(scene)
+    warm.render(table, seed=5)
+    reused = warm.render(_lambert_model(), seed=5)
+    fresh = build_simulator(scene).render(_lambert_model(), seed=5)
+    assert torch.equal(reused, fresh)
+    assert not torch.equal(warm.render(table, seed=5), reused)

@@ -36,6 +36,7 @@ Tensor = torch.Tensor
 
 
 INTEGRATORS = ("closed_form", "direct_mis", "path")
+_PLUGIN_NAMES: dict[type, str] = {}
 CLOSED_FORM_INTEGRATOR = "brdfbench_closed_form"
 
 
@@ -67,23 +68,46 @@ class MitsubaSimulator(Simulator):
         with mitsuba_env.mitsuba_variant(self.variant):
             from . import mitsuba_bsdf
 
-            bsdf = mitsuba_bsdf.bsdf_dict(model, rep_name=self._plugin_name(model, mitsuba_bsdf), sampler=self.sampler,
-                                          sampler_params=self.sampler_params, material=material, kernel=self.kernel)
-            fault = None
-            try:
-                scene = self._load(bsdf, seed)
-                rendered = mitsuba_bsdf.render(scene, seed=seed, spp=self.spp, check=False)
-                image = torch.from_numpy(np.ascontiguousarray(rendered.numpy()[..., :3], dtype=np.float32))
+            rep_name = self._plugin_name(model, mitsuba_bsdf)
+            scene = self._reuse(model, rep_name, material, seed, mitsuba_bsdf)
+            if scene is None:
+                bsdf = mitsuba_bsdf.bsdf_dict(model, rep_name=rep_name, sampler=self.sampler,
+                                              sampler_params=self.sampler_params, material=material, kernel=self.kernel)
                 try:
-                    mitsuba_bsdf.check_finite(scene)
-                except RenderError as exc:
-                    fault = str(exc)
-            finally:
-                mitsuba_bsdf.forget_models()
-                scene = None  # noqa: F841 - a live scene keeps its BSDFs in drjit's registry of instances
-            if fault:  # raised afresh, so no traceback keeps the scene (and its BSDFs) alive
+                    scene = self._load(bsdf, seed)
+                finally:
+                    mitsuba_bsdf.forget_models()
+                self._scene = (self.variant, seed, scene)
+            fault = None
+            rendered = mitsuba_bsdf.render(scene, seed=seed, spp=self.spp, check=False)
+            image = torch.from_numpy(np.ascontiguousarray(rendered.numpy()[..., :3], dtype=np.float32))
+            try:
+                mitsuba_bsdf.check_finite(scene)
+            except RenderError as exc:
+                fault = str(exc)
+            scene = None  # noqa: F841 - only self._scene keeps it
+            if fault:  # raised afresh, so no traceback keeps this render's objects alive
                 raise RenderError(fault)
             return image
+
+    def _reuse(self, model: Representation, rep_name: str, material: str, seed: int, mitsuba_bsdf):
+        """The scene loaded for the previous render with this model swapped into its
+        adapter BSDFs, or None. Loading a scene costs as much as a closed-form render;
+        swapping keeps the kernel too, since per-material data are kernel inputs. Only a
+        render with the same seed reuses it: the loaded sensor's sampler seed enters the
+        random sequence besides `mi.render`'s own seed."""
+        cached = getattr(self, "_scene", None)
+        if cached is None or cached[:2] != (self.variant, seed):
+            self._scene = None  # the old scene's BSDFs must not outlive it in drjit's registry
+            return None
+        scene = cached[2]
+        for shape in scene.shapes():
+            bsdf = shape.bsdf()
+            old = getattr(bsdf, "adapter", None)
+            if isinstance(old, mitsuba_bsdf.BrdfAdapter) and old.model is not model:
+                bsdf.adapter = mitsuba_bsdf.BrdfAdapter(model, rep_name, material or old.material, old.sampler,
+                                                        old.sampler_name, self.kernel)
+        return scene
 
     @staticmethod
     def _plugin_name(model: Representation, mitsuba_bsdf) -> str:
@@ -91,13 +115,18 @@ class MitsubaSimulator(Simulator):
         model of no registered class, such as the harness's table reference."""
         from .. import registry
 
-        for name in mitsuba_bsdf.register_plugins():
-            try:
-                if registry.get("representations", name).load() is type(model):
-                    return name
-            except Exception:  # a broken third-party entry point is not this render's concern
-                continue
-        return "merl"
+        names = mitsuba_bsdf.register_plugins()
+        if type(model) not in _PLUGIN_NAMES:
+            found = "merl"
+            for name in names:
+                try:
+                    if registry.get("representations", name).load() is type(model):
+                        found = name
+                        break
+                except Exception:  # a broken third-party entry point is not this render's concern
+                    continue
+            _PLUGIN_NAMES[type(model)] = found
+        return _PLUGIN_NAMES[type(model)]
 
     def _load(self, bsdf: dict, seed: int):
         import mitsuba as mi
