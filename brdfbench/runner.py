@@ -38,9 +38,12 @@ DTYPES = {"float32": torch.float32, "float64": torch.float64}
 #: none (the list must be empty): it always measures its own per-spp errors and timings.
 HARNESS_KINDS = {"accuracy": ("merl_grid", "random_pairs"), "render": ("image",), "convergence": ()}
 RENDERED_KINDS = ("render", "convergence")
-#: Fields read only by the convergence harness: left out of other kinds' config hash, so
-#: adding them did not invalidate cells already in a store.
+#: Fields only rendered kinds read, and of those the ones only convergence reads. A kind's
+#: config hash leaves out the fields it does not read, so that adding them did not
+#: invalidate the cells already in a store.
+RENDER_FIELDS = ("kind", "simulator", "backend", "sampler", "sampler_params", "spp", "exposure", "save_images")
 CONVERGENCE_FIELDS = ("spp_ladder", "reference_spp")
+UNHASHED_FIELDS = {"accuracy": RENDER_FIELDS + CONVERGENCE_FIELDS, "render": CONVERGENCE_FIELDS, "convergence": ()}
 
 
 @dataclass(frozen=True)
@@ -254,11 +257,9 @@ def _measurer(cfg: RunConfig, scene, metric_specs: list, dtype: torch.dtype, fin
         return _convergence_measurer(cfg, scene, dtype, fingerprint)
     if cfg.harness.kind == "render":
         from .harness.render import RenderHarness
-        from .render.simulate import build_simulator
 
         h = cfg.harness
-        simulator = build_simulator(scene, name=h.simulator, sampler=h.sampler, sampler_params=h.sampler_params,
-                                    spp=h.spp, dtype=dtype, backend=h.backend)
+        simulator = _simulator_factory(h, scene, dtype)(h.spp)
         harness = RenderHarness(
             simulator, metric_specs, out_dir=cfg.results_dir / "renders" / scene.name, dataset_fingerprint=fingerprint,
             seed=cfg.seed, exposure=h.exposure, save_images=h.save_images,
@@ -277,19 +278,27 @@ def _measurer(cfg: RunConfig, scene, metric_specs: list, dtype: torch.dtype, fin
 def _convergence_measurer(cfg: RunConfig, scene, dtype: torch.dtype, fingerprint: str):
     """Error against the model's own high-spp render along the spp ladder (harness.convergence)."""
     from .harness.convergence import ConvergenceHarness
-    from .render.simulate import build_simulator
 
     h = cfg.harness
-    build = lambda spp: build_simulator(scene, name=h.simulator, sampler=h.sampler,  # noqa: E731
-                                        sampler_params=h.sampler_params, spp=spp, dtype=dtype, backend=h.backend)
     harness = ConvergenceHarness(
-        build, h.spp_ladder, h.reference_spp, out_dir=cfg.results_dir / "renders" / scene.name / "convergence",
+        _simulator_factory(h, scene, dtype), h.spp_ladder, h.reference_spp, out_dir=cfg.results_dir / "renders" / scene.name / "convergence",
         dataset_fingerprint=fingerprint, seed=cfg.seed, exposure=h.exposure, save_images=h.save_images,
         key={"scene": cfg.scene, "scene_params": cfg.scene_params, "sampler": h.sampler,
              "sampler_params": h.sampler_params, "dtype": h.dtype,
              "representation": cfg.representation, "params": cfg.representation_params},
     )
     return lambda model, material: harness.measure(model, material, cfg.label)
+
+
+def _simulator_factory(h: HarnessConfig, scene, dtype: torch.dtype):
+    """spp -> the simulator the harness config asks for on this scene, at that spp."""
+    from .render.simulate import build_simulator
+
+    def build(spp: int | None):
+        return build_simulator(scene, name=h.simulator, sampler=h.sampler, sampler_params=h.sampler_params,
+                               spp=spp, dtype=dtype, backend=h.backend)
+
+    return build
 
 
 def _scene_label(cfg: RunConfig) -> str:
@@ -302,8 +311,9 @@ def _scene_label(cfg: RunConfig) -> str:
 
 
 def _hashed_harness(harness: HarnessConfig) -> dict[str, Any]:
-    """The harness fields in the config hash: convergence-only fields only for that kind."""
-    return {k: v for k, v in harness.__dict__.items() if harness.kind == "convergence" or k not in CONVERGENCE_FIELDS}
+    """The harness fields in the config hash: those its kind reads."""
+    skip = UNHASHED_FIELDS[harness.kind]
+    return {k: v for k, v in harness.__dict__.items() if k not in skip}
 
 
 def plan_folds(materials: tuple[str, ...], needs_training: bool, folds: int, seed: int) -> list[tuple[list[str] | None, list[str]]]:

@@ -142,3 +142,14 @@ def test_a_models_own_fit_loss_is_recorded(tmp_path, synthetic_cache):
     df = ResultsStore(tmp_path / "brdfbench.sqlite").frame()
     loss = df[df.metric == "fit_loss"]
     assert len(loss) == 1 and loss.unit.iloc[0] == "objective" and 0 < loss.value.iloc[0] < 1
+
+
+def test_fields_an_accuracy_harness_does_not_read_leave_its_cells_valid(tmp_path, synthetic_cache):
+    """Rendering-only harness fields stay out of an accuracy job's config hash."""
+    from dataclasses import replace
+
+    first = run(_cfg(tmp_path, synthetic_cache, "lambert", limit=2))
+    again = run(_cfg(tmp_path, synthetic_cache, "lambert", limit=2,
+                     harness=replace(QUICK, sampler="ggx", spp=8, spp_ladder=(1, 2), exposure=1.0)))
+    assert first["done"] == 2 and again == {"done": 0, "skipped": 2, "failed": 0}
+    assert run(_cfg(tmp_path, synthetic_cache, "lambert", limit=2, harness=replace(QUICK, n_random=2048)))["done"] == 2

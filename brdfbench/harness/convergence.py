@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import logging
 import math
 import time
 from pathlib import Path
@@ -31,13 +30,11 @@ from typing import Any, Callable, Sequence
 
 import torch
 
-from .. import images
-from ..errors import ConfigError, DataError
+from ..errors import ConfigError
 from ..protocol import Material, Representation
 from ..provenance import config_hash
 from . import Measurement
-
-log = logging.getLogger(__name__)
+from .render import cached_render
 
 #: Simulators whose renders carry Monte Carlo noise (the closed form is noise-free).
 MONTE_CARLO = ("direct_mis", "path")
@@ -181,19 +178,12 @@ class ConvergenceHarness:
 
     def reference(self, model: Representation, material: Material, label: str) -> torch.Tensor:
         """The model's own `reference_spp` render, from the cache when a readable one is there."""
-        path = self.dir / "reference" / label / f"{material.name}.exr"
-        if path.is_file():
-            try:
-                return images.read_exr(path)
-            except DataError as exc:  # a damaged cache entry is rendered again, not trusted
-                log.warning("re-rendering the convergence reference: %s", exc)
-        image = self.reference_simulator.render(model, seed=derive_seed(self.seed, "reference"),
-                                               material=material.name, label=f"{label} reference")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        images.write_exr(path, image)
-        if self.save_images:
-            images.write_png(path.with_suffix(".png"), image, exposure=self.exposure)
-        return image
+        return cached_render(
+            self.dir / "reference" / label / f"{material.name}.exr",
+            lambda: self.reference_simulator.render(model, seed=derive_seed(self.seed, "reference"),
+                                                    material=material.name, label=f"{label} reference"),
+            exposure=self.exposure, png=self.save_images, what="the convergence reference",
+        )
 
     def measure(self, model: Representation, material: Material, label: str) -> list[Measurement]:
         """Per rung: rmse_hdr, relmse_hdr, render_time; then convergence_slope and convergence_rmse_1spp."""

@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import torch
 
@@ -69,15 +69,11 @@ class RenderHarness:
         self.dir = Path(out_dir) / config_hash({**(key or {}), "dataset": dataset_fingerprint, "seed": seed})[:12]
 
     def reference(self, material: Material) -> torch.Tensor:
-        path = self.dir / "reference" / f"{material.name}.exr"
-        if path.is_file():
-            try:
-                return images.read_exr(path)
-            except DataError as exc:  # a damaged cache entry is rendered again, not trusted
-                log.warning("re-rendering the reference: %s", exc)
-        image = self.simulator.render(TableReference(material), seed=self.seed, material=material.name, label="reference")
-        self._save(path, image)
-        return image
+        return cached_render(
+            self.dir / "reference" / f"{material.name}.exr",
+            lambda: self.simulator.render(TableReference(material), seed=self.seed, material=material.name, label="reference"),
+            exposure=self.exposure, what="the reference",
+        )
 
     def measure(self, model: Representation, material: Material, label: str) -> list[Measurement]:
         reference = self.reference(material)
@@ -85,7 +81,7 @@ class RenderHarness:
         image = self.simulator.render(model, seed=self.seed, material=material.name, label=label)
         seconds = time.perf_counter() - t0
         if self.save_images:
-            self._save(self.dir / label / f"{material.name}.exr", image)
+            save_image(self.dir / label / f"{material.name}.exr", image, exposure=self.exposure)
         out = []
         for spec in self.metric_specs:
             metric = spec.load()(exposure=self.exposure)
@@ -95,8 +91,24 @@ class RenderHarness:
         out.append(Measurement("render_samples_per_s", self.simulator.samples / seconds, "samples/s", True))
         return out
 
-    def _save(self, exr: Path, image: torch.Tensor) -> None:
-        exr.parent.mkdir(parents=True, exist_ok=True)
-        images.write_exr(exr, image)
-        images.write_png(exr.with_suffix(".png"), image, exposure=self.exposure)
+
+def save_image(exr: Path, image: torch.Tensor, *, exposure: float, png: bool = True) -> None:
+    """Write the radiance as EXR and, with `png`, the tone-mapped image beside it."""
+    exr.parent.mkdir(parents=True, exist_ok=True)
+    images.write_exr(exr, image)
+    if png:
+        images.write_png(exr.with_suffix(".png"), image, exposure=exposure)
+
+
+def cached_render(exr: Path, render: Callable[[], torch.Tensor], *, exposure: float, png: bool = True,
+                  what: str = "the image") -> torch.Tensor:
+    """The image cached at `exr` when it reads back, else `render()`, saved there."""
+    if exr.is_file():
+        try:
+            return images.read_exr(exr)
+        except DataError as exc:  # a damaged cache entry is rendered again, not trusted
+            log.warning("re-rendering %s: %s", what, exc)
+    image = render()
+    save_image(exr, image, exposure=exposure, png=png)
+    return image
 

@@ -15,7 +15,7 @@ import torch
 
 from ..protocol import Representation
 from . import sphere
-from .simulator import Simulator, SphereHits, eval_brdf, sphere_hits
+from .simulator import Simulator, SphereHits, eval_brdf, light_terms, sphere_hits
 
 Tensor = torch.Tensor
 
@@ -38,11 +38,9 @@ class ClosedForm(Simulator):
         cam, hits = self.scene.camera, self._hits
         radiance = torch.zeros(self.samples, 3, dtype=torch.float64)
         shaded = torch.zeros(hits.index.shape[0], 3, dtype=torch.float64)
-        for light in self.scene.lights:
-            toward = -torch.tensor(light.direction, dtype=torch.float64)
-            toward = (toward / toward.norm()).expand(hits.index.shape[0], 3)
-            wi = sphere.to_local(hits.frame, toward)
+        for toward, irradiance in light_terms(self.scene):
+            wi = sphere.to_local(hits.frame, toward.expand(hits.index.shape[0], 3))
             f = eval_brdf(model, wi, hits.view, self.dtype)
-            shaded += f * wi[:, 2:3].clamp_min(0) * torch.tensor(light.irradiance, dtype=torch.float64)
+            shaded += f * wi[:, 2:3].clamp_min(0) * irradiance
         radiance[hits.index] = shaded
         return radiance.reshape(cam.height, cam.width, -1, 3).mean(dim=2)

@@ -21,7 +21,7 @@ from ..sampling import Sampler
 from ..scenes import Scene
 from . import sphere
 from .envmap import Envmap
-from .simulator import Simulator, eval_brdf, sphere_hits
+from .simulator import Simulator, eval_brdf, light_terms, sphere_hits
 
 Tensor = torch.Tensor
 CHUNK = 2**17  # camera samples per batch: bounds memory at a few hundred MB
@@ -50,11 +50,7 @@ class DirectMIS(Simulator):
 
     @functools.cached_property
     def _light_terms(self) -> list[tuple[Tensor, Tensor]]:
-        out = []
-        for light in self.scene.lights:
-            toward = -torch.tensor(light.direction, dtype=torch.float64)
-            out.append((toward / toward.norm(), torch.tensor(light.irradiance, dtype=torch.float64)))
-        return out
+        return light_terms(self.scene)
 
     def _render(self, model: Representation, *, seed: int, material: str = "") -> Tensor:
         cam = self.scene.camera

@@ -433,10 +433,16 @@ def class_key(obj: Any) -> str:
 def kernel_for(model) -> Kernel | None:
     """The drjit kernel of a model: its `drjit_kernel()` hook, else a built-in twin, else None
     (the torch path). Always None in scalar variants, which take the torch path."""
+    return native_twin(model, "drjit_kernel", BUILTIN)
+
+
+def native_twin(obj, hook_name: str, builtin: dict[str, Callable]):
+    """`obj.<hook_name>()` where the object has that hook, else the builder registered for
+    its exact class in `builtin`, else None; always None in scalar variants."""
     if not dr.is_jit_v(mi.Float):
         return None
-    hook = getattr(model, "drjit_kernel", None)
+    hook = getattr(obj, hook_name, None)
     if callable(hook):
         return hook()
-    builder = BUILTIN.get(class_key(model))
-    return builder(model) if builder is not None else None
+    builder = builtin.get(class_key(obj))
+    return builder(obj) if builder is not None else None

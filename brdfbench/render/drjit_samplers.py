@@ -21,7 +21,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .drjit_kernels import FLOAT32_MAX, class_key, div, expm1, log1p
+from .drjit_kernels import FLOAT32_MAX, div, expm1, log1p, native_twin
 
 INV_PI = 1.0 / math.pi
 INV_2PI = 1.0 / (2.0 * math.pi)
@@ -290,10 +290,4 @@ BUILTIN: dict[str, Callable[[Any], DrSampler]] = {
 def sampler_for(sampler) -> DrSampler | None:
     """The drjit twin of a sampler: its `drjit_sampler()` hook, else a built-in twin, else
     None (the torch path). Always None in scalar variants."""
-    if not dr.is_jit_v(mi.Float):
-        return None
-    hook = getattr(sampler, "drjit_sampler", None)
-    if callable(hook):
-        return hook()
-    builder = BUILTIN.get(class_key(sampler))
-    return builder(sampler) if builder is not None else None
+    return native_twin(sampler, "drjit_sampler", BUILTIN)

@@ -76,6 +76,15 @@ class Simulator(ABC):
         return image
 
 
+def light_terms(scene: Scene) -> list[tuple[Tensor, Tensor]]:
+    """(unit direction toward the light, irradiance) per directional light, fp64."""
+    out = []
+    for light in scene.lights:
+        toward = -torch.tensor(light.direction, dtype=torch.float64)
+        out.append((toward / toward.norm(), torch.tensor(light.irradiance, dtype=torch.float64)))
+    return out
+
+
 def eval_brdf(model: Representation, wi: Tensor, wo: Tensor, dtype: torch.dtype) -> Tensor:
     """BRDF values (N, 3) in fp64 for local directions given in any float dtype, evaluated in `dtype`."""
     return model.eval(wi.to(dtype), wo.to(dtype)).to(torch.float64)
