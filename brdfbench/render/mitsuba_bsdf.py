@@ -171,6 +171,8 @@ class BrdfAdapter:
         ok = active & (light.z > 0) & (view.z > 0)
         if self.kernel is not None:
             f = self.kernel.eval(light, view)
+            if getattr(self.kernel, "finite", False):  # the kernel promises finite values
+                return dr.select(ok, f, 0.0)
         else:
             self._torch_ready()
             with torch.no_grad():
@@ -481,15 +483,26 @@ def render(scene, *, seed: int = 0, spp: int = 0, check: bool = True):
 
 
 def sphere_scene(bsdf: dict, *, resolution: int = 256, spp: int = 16, max_depth: int = 2, seed: int = 0,
-                 light_direction=(-1.0, -1.0, -1.0), irradiance: float = 3.0, ambient: float = 0.1) -> dict:
+                 light_direction=(-1.0, -1.0, -1.0), irradiance: float = 3.0, ambient: float = 0.1,
+                 integrator: str = "path") -> dict:
     """A scene dict: the unit sphere with `bsdf` filling a square perspective view (box
     filter), lit by one directional light and a constant ambient, rendered by Mitsuba's
-    `path` integrator."""
+    `path` integrator (with `max_depth`), or with integrator="direct_mis" by brdfbench's
+    direct-lighting integrator for convex objects (which calls the BSDF without dispatch)."""
     from .camera import Camera
 
+    if integrator == "direct_mis":
+        from .mitsuba_sim import DIRECT_MIS_INTEGRATOR, register_integrators
+
+        register_integrators()
+        integrator_dict: dict[str, Any] = {"type": DIRECT_MIS_INTEGRATOR}
+    elif integrator == "path":
+        integrator_dict = {"type": "path", "max_depth": max_depth}
+    else:
+        raise ConfigError(f"sphere_scene: integrator={integrator!r}; expected 'path' or 'direct_mis'")
     return {
         "type": "scene",
-        "integrator": {"type": "path", "max_depth": max_depth},
+        "integrator": integrator_dict,
         "sensor": Camera(width=resolution, height=resolution).mitsuba_dict(spp, seed),
         "sphere": {"type": "sphere", "bsdf": bsdf},
         "sun": {"type": "directional", "direction": list(light_direction),

@@ -1,16 +1,30 @@
-"""Render throughput of the Mitsuba adapter against a built-in Mitsuba BSDF (pytest-benchmark).
+"""Render throughput of the Mitsuba adapter against Mitsuba's own BSDFs (pytest-benchmark).
 
 The same scene for every BSDF (`mitsuba_bsdf.sphere_scene`): the unit sphere at 256²,
-perspective camera, box filter, one directional light and a constant ambient, Mitsuba's
-`path` integrator with max_depth 2, 16 spp, llvm_ad_rgb. Adapters sample with the default
-cosine sampler. Each timed render includes tracing (the kernel comes from the cache: one
-warm-up render compiles it). Measure with
+perspective camera, box filter, one directional light and a constant ambient, 16 spp,
+llvm_ad_rgb, rendered by two integrators:
 
-    python -m pytest tests/benchmarks/test_render_throughput.py --benchmark-enable
+- `path`: Mitsuba's path tracer at max_depth 2 — the plugin as it runs in any Mitsuba
+  scene, behind Mitsuba's BSDF dispatch (a symbolic virtual call: per-material data are
+  call data, gathered per lane);
+- `direct_mis`: brdfbench's direct-lighting integrator for convex objects, the one the
+  render harness uses for environment-lit spheres; it calls the scene's only BSDF
+  directly, so per-material data are kernel parameters.
 
-M samples/s (camera samples) is in `extra_info["msamples_per_s"]`.
+Adapters sample with the default cosine sampler; Mitsuba's BSDFs with their own. Each
+timed render includes tracing (the kernel comes from drjit's cache: one warm-up render
+compiles it). Measure with
+
+    python -m pytest tests/benchmarks/test_render_throughput.py --benchmark-enable -s
+
+`test_render_throughput` gives pytest-benchmark's statistics per (integrator, BSDF);
+`test_throughput_ratios` renders every BSDF in turn, several cycles over (one scene alive
+at a time: a symbolic call traces every live BSDF), and reports each one's best
+M samples/s and its ratios to `roughconductor` and `merl` in `extra_info`, so that the
+ratios come from one interleaved run.
 """
 
+import gc
 import time
 
 import pytest
@@ -20,7 +34,9 @@ from brdfbench import mitsuba_env, registry
 from brdfbench.testing.kit import reference_material
 
 RESOLUTION, SPP = 256, 16
-CASES = ["roughconductor", "merl", "nbrdf", "ggx", "cook_torrance"]
+CASES = ("roughconductor", "merl", "nbrdf", "naive_mlp", "ggx", "cook_torrance", "lambert")
+INTEGRATORS = ("path", "direct_mis")
+ROUNDS, CYCLES = 5, 3
 
 pytestmark = pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="llvm_ad_rgb needs libLLVM >= 19")
 
@@ -32,38 +48,73 @@ def mb():
 
         mitsuba_bsdf.register_plugins()
         yield mitsuba_bsdf
+        mitsuba_bsdf.forget_models()
 
 
-def bsdf(mb, name: str) -> dict:
-    """Mitsuba's own rough conductor, or an adapter of a model of synthetic material 1
-    (nbrdf with random weights: its cost does not depend on them)."""
-    if name == "roughconductor":
-        return {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2}
-    spec = registry.get("representations", name)
-    if name == "nbrdf":
-        from brdfbench_representations import mlp
+@pytest.fixture(scope="module")
+def bsdfs(mb) -> dict[str, dict]:
+    """Mitsuba's rough conductor, and adapters of models of the reference material (the
+    MLPs with Glorot weights: their cost does not depend on the values)."""
+    from brdfbench_representations import mlp
 
-        model = spec.create()
-        model.weights = mlp.glorot_init(model.hidden, torch.Generator().manual_seed(0))
-    elif name == "merl":
-        model = spec.create().fit(reference_material())
-    else:
-        model = spec.create(n_samples=512, restarts=1).fit(reference_material())
-    return mb.bsdf_dict(model, rep_name=name)
+    out = {"roughconductor": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2}}
+    for name in CASES[1:]:
+        spec = registry.get("representations", name)
+        if name in ("nbrdf", "naive_mlp"):
+            model = spec.create()
+            model.weights = mlp.glorot_init(model.hidden, torch.Generator().manual_seed(0))
+        elif name in ("merl", "lambert"):
+            model = spec.create().fit(reference_material())
+        else:
+            model = spec.create(n_samples=512, restarts=1).fit(reference_material())
+        out[name] = mb.bsdf_dict(model, rep_name=name)
+    return out
 
 
-@pytest.mark.parametrize("name", CASES)
-def test_render_throughput(benchmark, mb, name):
-    scene = mb.load_dict(mb.sphere_scene(bsdf(mb, name), resolution=RESOLUTION, spp=SPP))
+def _scene(mb, bsdf: dict, integrator: str):
+    scene = mb.load_dict(mb.sphere_scene(bsdf, resolution=RESOLUTION, spp=SPP, integrator=integrator))
     mb.render(scene)  # compiles (or loads) the kernel
-    times = []
+    return scene
 
-    def run():
-        start = time.perf_counter()
-        mb.render(scene, seed=len(times) + 1)
-        times.append(time.perf_counter() - start)
 
-    benchmark.pedantic(run, rounds=3, iterations=1)
-    rate = RESOLUTION * RESOLUTION * SPP / min(times) / 1e6
-    benchmark.extra_info["msamples_per_s"] = round(rate, 2)
-    print(f"{name}: {rate:.1f} M samples/s")
+def _rate(seconds: float) -> float:
+    return RESOLUTION * RESOLUTION * SPP / seconds / 1e6
+
+
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+@pytest.mark.parametrize("name", CASES)
+def test_render_throughput(benchmark, mb, bsdfs, name, integrator):
+    scene = _scene(mb, bsdfs[name], integrator)
+    seeds = iter(range(1, 1000))
+    benchmark.pedantic(lambda: mb.render(scene, seed=next(seeds)), rounds=ROUNDS, iterations=1)
+    if benchmark.enabled:  # disabled (the default test run): one render, no statistics
+        benchmark.extra_info["msamples_per_s"] = round(_rate(benchmark.stats.stats.min), 2)
+    del scene
+    gc.collect()
+
+
+@pytest.mark.parametrize("integrator", INTEGRATORS)
+def test_throughput_ratios(benchmark, mb, bsdfs, integrator):
+    cycles, rounds = (CYCLES, ROUNDS) if benchmark.enabled else (1, 2)  # disabled: a smoke run
+
+    def sweep() -> dict[str, float]:
+        best = {name: float("inf") for name in CASES}
+        for _ in range(cycles):
+            for name in CASES:
+                scene = _scene(mb, bsdfs[name], integrator)
+                for seed in range(1, rounds):
+                    start = time.perf_counter()
+                    mb.render(scene, seed=seed)
+                    best[name] = min(best[name], time.perf_counter() - start)
+                del scene
+                gc.collect()
+        return best
+
+    best = benchmark.pedantic(sweep, rounds=1, iterations=1)
+    rates = {name: _rate(seconds) for name, seconds in best.items()}
+    print(f"\n{integrator}: M samples/s (x roughconductor, x merl)")
+    for name, rate in rates.items():
+        to_rc, to_merl = rate / rates["roughconductor"], rate / rates["merl"]
+        benchmark.extra_info[name] = {"msamples_per_s": round(rate, 2), "x_roughconductor": round(to_rc, 3),
+                                      "x_merl": round(to_merl, 3)}
+        print(f"  {name:15s} {rate:6.1f}   {to_rc:5.2f}   {to_merl:5.2f}")

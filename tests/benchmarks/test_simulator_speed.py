@@ -5,7 +5,9 @@ read-back), 256², the synthetic material 0's table as the BSDF (MERL gather ker
 - `sphere_directional`: the closed form (one BRDF evaluation per pixel and light) against
   `path` at 64 spp;
 - `sphere_envmap`: direct MIS against `path` at equal RMSE, from efficiency
-  1 / (RMSE² · time) at 64 spp, RMSE against a 1024-spp direct-MIS reference.
+  1 / (RMSE² · time) at 64 spp, RMSE against a 1024-spp direct-MIS reference. Under the
+  environment alone both draw the same numbers at one seed, so their RMSEs are equal and
+  the ratio is the time direct MIS saves by tracing nothing after the camera ray.
 
     python -m pytest tests/benchmarks/test_simulator_speed.py --benchmark-enable
 
@@ -29,7 +31,7 @@ def model(small_dataset):
     return TableReference(small_dataset.load(small_dataset.materials[0]))
 
 
-def _best_time(sim, model, repeats=3, seed=0):
+def _best_time(sim, model, repeats=7, seed=0):
     """Best of `repeats` renders at one seed, as the render harness renders (reference and
     model at the job's seed: the loaded scene is reused)."""
     sim.render(model, seed=seed)  # compiles (or loads) the kernels
