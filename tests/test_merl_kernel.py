@@ -192,11 +192,26 @@ def test_tables_sit_on_aligned_memory(dk):
         assert kernel.finite
 
 
-@pytest.mark.parametrize("downsample", [1, 4])
-def test_kernel_values_equal_the_torch_lookup(dk, downsample):
-    model = registry.get("representations", "merl").create(downsample=downsample).fit(reference_material())
-    kernel = dk.kernel_for(model)
-    wi, wo = random_pairs(200_000, seed=8)
+def _kernel_values(kernel, wi, wo) -> np.ndarray:
     got = kernel.eval(vec(wi), vec(wo))
-    got = np.stack([np.asarray(got[c]) for c in range(3)], axis=1)
-    np.testing.assert_allclose(got, model.eval(wi, wo).numpy(), rtol=1e-6, atol=0)
+    return np.stack([np.asarray(got[c]) for c in range(3)], axis=1)
+
+
+@pytest.mark.parametrize("params", [{}, {"downsample": 4}, {"mode": "trilinear"}], ids=["nearest", "downsample4", "trilinear"])
+def test_kernel_values_equal_the_torch_lookup(dk, params):
+    """Nearest cells: the very values (fp32 rounding of the table); trilinear: to fp32
+    rounding of the weights, including grazing, θh = 0 and invalid neighbours. (Not at
+    ωi = ωo, where φd is undefined and its rounding noise picks the φd neighbours.)"""
+    model = registry.get("representations", "merl").create(**params).fit(reference_material())
+    kernel = dk.kernel_for(model)
+    assert kernel is not None
+    wi, wo = random_pairs(200_000, seed=8)
+    for fam, pair in adversarial_pairs(20_000, torch.float64, seed=9).items():
+        if fam not in ("below_horizon", "identical"):
+            wi, wo = torch.cat([wi, above(*pair)[0]]), torch.cat([wo, above(*pair)[1]])
+    got, want = _kernel_values(kernel, wi, wo), model.eval(wi, wo).numpy()
+    assert np.isfinite(got).all()
+    if params.get("mode") == "trilinear":  # fp32 coordinates move a weight by up to 3e-5 of a cell
+        np.testing.assert_allclose(got, want, rtol=2e-4, atol=1e-7)
+    else:
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=0)

@@ -210,8 +210,10 @@ def render(mi, mb, bsdf: dict, **kw) -> np.ndarray:
     return np.asarray(mb.render(scene))
 
 
-def test_native_merl_render_equals_torch_path(mi, mb):
-    model = fitted("merl")
+@pytest.mark.parametrize("mode", ["nearest", "trilinear"])
+def test_native_merl_render_equals_torch_path(mi, mb, mode):
+    model = fitted("merl") if mode == "nearest" else registry.get("representations", "merl").create(
+        mode=mode).fit(reference_material())
     native = render(mi, mb, mb.bsdf_dict(model, rep_name="merl"))
     via_torch = render(mi, mb, mb.bsdf_dict(model, rep_name="merl", kernel="torch"))
     assert np.isfinite(native).all() and native.mean() > 0.01
@@ -220,6 +222,30 @@ def test_native_merl_render_equals_torch_path(mi, mb):
 
 class ThirdPartyCosine(Cosine):
     """A sampler without a drjit twin: the adapter calls it in torch."""
+
+
+class Diffuse(Lambert):
+    """A third-party representation named like Mitsuba's own `diffuse` plugin."""
+
+
+def test_a_name_mitsuba_has_is_registered_with_a_prefix(mi, mb):
+    registry.register("representations", RepresentationSpec(
+        name="diffuse", description="test plugin", target=f"{__name__}:Diffuse", tags=Lambert.tags))
+    try:
+        with pytest.warns(UserWarning, match="named like Mitsuba's own plugin 'diffuse'.*'brdfbench_diffuse'"):
+            mb.register_plugins()
+        assert mb.plugin_name("diffuse") == "brdfbench_diffuse" and mb.plugin_name("lambert") == "lambert"
+        model = Diffuse()
+        model.albedo = torch.tensor([0.8, 0.4, 0.2], dtype=torch.float64)
+        bsdf = mb.bsdf_dict(model, rep_name="diffuse")
+        assert bsdf["type"] == "brdfbench_diffuse"
+        loaded = mb.load_dict(bsdf)
+        assert loaded.adapter.rep_name == "diffuse" and loaded.adapter.kernel_path == "torch"  # a subclass: no twin
+        light, view = directions(64, seed=11)
+        expected = (model.eval(light, view) * light[:, 2:3]).numpy()
+        np.testing.assert_allclose(adapter_eval(mi, loaded, light, view), expected, rtol=2e-5, atol=1e-6)
+    finally:
+        registry.unregister("representations", "diffuse")
 
 
 def test_third_party_sampler_renders_through_torch(mi, mb):
@@ -374,8 +400,7 @@ def test_render_mode_only_where_needed(mi, mb):
     assert not mb.needs_evaluated_mode([native])
     with mb.render_mode([native]) as changed:
         assert not changed and dr.flag(dr.JitFlag.SymbolicCalls)
-    trilinear = registry.get("representations", "merl").create(mode="trilinear").fit(reference_material())
-    slow = mb.load_dict(mb.bsdf_dict(trilinear, rep_name="merl"))
+    slow = mb.load_dict(mb.bsdf_dict(fitted("merl"), rep_name="merl", kernel="torch"))
     assert slow.adapter.kernel_path == "torch"
     # A symbolic call would trace `slow` too, even for a scene without it.
     assert mb.needs_evaluated_mode([native]) and mb.needs_evaluated_mode()

@@ -19,8 +19,8 @@ own symbolic kernels: no torch call, no host round trip, no per-bounce kernel la
     - only lanes with both directions strictly above the horizon matter; the adapter
       zeroes the others and counts (and zeroes) non-finite values itself.
 (b) a built-in twin, matched by exact class (a subclass may change `_eval`): the MERL
-    table (nearest cell, also downsampled) and PCA (a reconstructed MERL table) as a
-    table gather, lambert, blinn_phong, cook_torrance, ggx, nbrdf and naive_mlp;
+    table (nearest cell, also downsampled, or trilinear) and PCA (a reconstructed MERL
+    table) as table gathers, lambert, blinn_phong, cook_torrance, ggx, nbrdf and naive_mlp;
 (c) None: the adapter evaluates the model in torch (evaluated mode, see mitsuba_bsdf.py).
 
 Kernels are used in JIT variants (llvm_*, cuda_*) only; scalar variants take the torch
@@ -34,9 +34,10 @@ and measures how far each continuous cell coordinate lies from a cell edge; a la
 `MERL_EDGE_TOL` cells of one (about 10x the fp32 path's worst error, measured over 10⁷
 adversarial and random pairs) or in an ill-conditioned configuration takes a symbolic branch
 that recomputes the cells in fp64 as brdfbench.merl does (`merl_indices`). The branch runs
-for ~0.3 % of lanes; rendering pays for it about 5 %, and 1.4x less than fp64 everywhere.
-drjit's fp64 atan2 and hypot may still differ from torch's in the last bit, which moves a
-pair only within ~1e-16 rad of a cell edge, or where the reference's own angle is rounding
+for ~0.3 % of a renderer's lanes and costs about 5 % of a render; with the packet gather
+below, the sphere benchmark renders 1.5x faster than with fp64 cells everywhere. drjit's
+fp64 atan2 and hypot may still differ from torch's in the last bit, which moves a pair
+only within ~1e-16 rad of a cell edge, or where the reference's own angle is rounding
 noise (φd at ωi = ωo exactly, where it is undefined).
 """
 
@@ -172,9 +173,9 @@ def spherical(v):
 # --------------------------------------------------------------------------- MERL tables
 
 
-def merl_indices(wi: mi.Vector3f, wo: mi.Vector3f):
-    """(θh, θd, φd) cell indices (mi.Int32) of direction pairs, computed in fp64 operation
-    by operation as brdfbench.merl.cell_indices."""
+def merl_coordinates64(wi: mi.Vector3f, wo: mi.Vector3f):
+    """Continuous (θh, θd, φd) cell coordinates (mi.Float64) whose integer parts are the
+    reference's cells, and θh, computed in fp64 operation by operation as brdfbench.merl."""
     wi, wo = mi.Vector3d(wi), mi.Vector3d(wo)
     h = half_vector(wi, wo)
     rho_h = dr.hypot(h.x, h.y)
@@ -185,11 +186,20 @@ def merl_indices(wi: mi.Vector3f, wo: mi.Vector3f):
     # Divisors are opaque: drjit turns a division by a literal into a product with its
     # reciprocal, which rounds differently from the reference's division.
     half_pi, pi = dr.opaque(mi.Float64, math.pi / 2.0), dr.opaque(mi.Float64, math.pi)
-    warped = dr.sqrt(dr.maximum(theta_h / half_pi * merl.RES_THETA_H * merl.RES_THETA_H, 0.0))
-    ih = dr.select(theta_h <= 0, 0, dr.clip(mi.Int32(warped), 0, merl.RES_THETA_H - 1))
-    id_ = dr.clip(mi.Int32(theta_d / half_pi * merl.RES_THETA_D), 0, merl.RES_THETA_D - 1)
+    u_h = dr.sqrt(dr.maximum(theta_h / half_pi * merl.RES_THETA_H * merl.RES_THETA_H, 0.0))
+    u_d = theta_d / half_pi * merl.RES_THETA_D
     p = dr.select(phi_d > math.pi, phi_d - math.pi, phi_d)
-    ip = dr.clip(mi.Int32(p / pi * (2 * merl.RES_PHI_D) / 2), 0, merl.RES_PHI_D - 1)
+    u_p = p / pi * (2 * merl.RES_PHI_D) / 2
+    return u_h, u_d, u_p, theta_h
+
+
+def merl_indices(wi: mi.Vector3f, wo: mi.Vector3f):
+    """(θh, θd, φd) cell indices (mi.Int32) of direction pairs, computed in fp64 operation
+    by operation as brdfbench.merl.cell_indices."""
+    u_h, u_d, u_p, theta_h = merl_coordinates64(wi, wo)
+    ih = dr.select(theta_h <= 0, 0, dr.clip(mi.Int32(u_h), 0, merl.RES_THETA_H - 1))
+    id_ = dr.clip(mi.Int32(u_d), 0, merl.RES_THETA_D - 1)
+    ip = dr.clip(mi.Int32(u_p), 0, merl.RES_PHI_D - 1)
     return ih, id_, ip
 
 
@@ -224,7 +234,7 @@ ATAN_COEFFICIENTS = _atan_coefficients()
 def atan_nonneg(y, x):
     """atan2(y, x) for y, x ≥ 0 (not both 0), in [0, π/2]; absolute error ~2e-7 rad in fp32."""
     big, small = dr.maximum(y, x), dr.minimum(y, x)
-    a = small / big
+    a = dr.select(big > 0, small / dr.select(big > 0, big, 1.0), 0.0)  # atan2(0, 0) = 0, as torch
     s = a * a
     r = ATAN_COEFFICIENTS[-1]
     for c in ATAN_COEFFICIENTS[-2:0:-1]:
@@ -307,11 +317,11 @@ class MerlTableKernel(Kernel):
     """Nearest-cell lookup of a MERL-layout table, optionally one sample per x³ block.
 
     `values` (3, n_θh, n_θd, n_φd) in 1/sr (negatives = invalid); stored clamped at 0 as
-    one fp32 drjit array of RGB0 quadruples (16 B a cell), read by one packet gather per
-    lookup. Inside Mitsuba's BSDF calls the table's address is call data, known per lane:
-    there a packet gather beats three per-channel gathers (1.07x on the sphere benchmark);
-    at the top level of brdfbench's own integrators it costs about 4 %. A finite table
-    yields finite values, so the adapter skips its non-finite count.
+    one fp32 drjit array of (R, G, B, valid) quadruples (16 B a cell), read by one packet
+    gather per lookup. Inside Mitsuba's BSDF calls the table's address is call data, known
+    per lane: there a packet gather beats three per-channel gathers (1.07x on the sphere
+    benchmark); at the top level of brdfbench's own integrators it costs about 4 %. A
+    finite table yields finite values, so the adapter skips its non-finite count.
     """
 
     name = "merl_table"
@@ -320,28 +330,79 @@ class MerlTableKernel(Kernel):
         self.name = name
         self.downsample = downsample
         self.shape = values.shape[1:]
-        rgb0 = aligned_zeros((int(np.prod(self.shape)), 4))
-        rgb0[:, :3] = np.clip(values, 0.0, None).reshape(3, -1).T
-        self.finite = bool(np.isfinite(rgb0).all())
-        self.table = mi.Float(rgb0.reshape(-1))  # drjit maps numpy's memory: no copy
+        rgbv = aligned_zeros((int(np.prod(self.shape)), 4))
+        flat = values.reshape(3, -1).T
+        rgbv[:, :3] = np.clip(flat, 0.0, None)
+        rgbv[:, 3] = np.all(flat >= 0, axis=1)
+        self.finite = bool(np.isfinite(rgbv).all())
+        self.table = mi.Float(rgbv.reshape(-1))  # drjit maps numpy's memory: no copy
 
     def eval(self, wi, wo):
         v = dr.gather(mi.Vector4f, self.table, mi.UInt32(merl_cell(wi, wo, self.downsample, self.shape)))
         return mi.Color3f(v.x, v.y, v.z)
 
 
-_TABLE_CACHE: dict[tuple, tuple] = {}  # (variant, id(values), downsample, name) -> (weakref to values, kernel)
+class MerlTrilinearKernel(MerlTableKernel):
+    """Trilinear interpolation between cell centres, as brdfbench.merl.lookup_trilinear:
+    θh and θd clamp at the table's ends, φd wraps with period π, invalid cells get zero
+    weight, and a point whose eight neighbours are all invalid is 0. The coordinates are
+    fp32 (`merl_coordinates`) where well posed, fp64 elsewhere: the weights are continuous,
+    so no cell choice hangs on a last bit, and the values agree with the fp64 torch lookup
+    to fp32 rounding."""
+
+    name = "merl_trilinear"
+
+    def eval(self, wi, wo):
+        u_h, u_d, u_p, _, _, well_posed = merl_coordinates(wi, wo)
+        # θh = 0 or θd = 0 (φh or φd undefined: the reference's conventions pick them) and
+        # grazing, nearly opposite pairs: fp64 coordinates, in a branch
+        u_h, u_d, u_p = dr.if_stmt(
+            (wi, wo, u_h, u_d, u_p), ~well_posed,
+            true_fn=lambda wi, wo, *u: tuple(mi.Float(c) for c in merl_coordinates64(wi, wo)[:3]),
+            false_fn=lambda wi, wo, *u: u, label="merl_trilinear_fp64")
+        n_h, n_d, n_p = self.shape
+
+        def corners(u, n, wrap):
+            x = u - 0.5
+            lo = dr.floor(x)
+            frac = x - lo
+            lo = mi.Int32(lo)
+            hi = lo + 1
+            if wrap:
+                lo = dr.select(lo < 0, lo + n, dr.select(lo >= n, lo - n, lo))
+                hi = dr.select(hi >= n, hi - n, hi)
+            else:
+                frac = dr.select((lo < 0) | (hi > n - 1), 0.0, frac)
+                lo, hi = dr.clip(lo, 0, n - 1), dr.clip(hi, 0, n - 1)
+            return (lo, 1.0 - frac), (hi, frac)
+
+        acc = [mi.Float(0.0)] * 3
+        total = mi.Float(0.0)
+        for ih, wh in corners(u_h, n_h, False):
+            for id_, wd in corners(u_d, n_d, False):
+                for ip, wp in corners(u_p, n_p, True):
+                    v = dr.gather(mi.Vector4f, self.table, mi.UInt32((ih * n_d + id_) * n_p + ip))
+                    w = wh * wd * wp * v.w
+                    acc = [a + w * c for a, c in zip(acc, (v.x, v.y, v.z))]
+                    total += w
+        inv = dr.select(total > 0, 1.0 / dr.select(total > 0, total, 1.0), 0.0)
+        return mi.Color3f(*(a * inv for a in acc))
+
+
+_TABLE_CACHE: dict[tuple, tuple] = {}  # (variant, id(values), downsample, name, class) -> (weakref to values, kernel)
 _TABLE_CACHE_SIZE = 8
 
 
-def table_kernel(values: np.ndarray, downsample: int = 1, name: str = "merl_table") -> MerlTableKernel:
-    """A MerlTableKernel for a table array, reused while that very array is alive: building
-    one copies 1.5 M cells to the device, which costs more than a small render."""
-    key = (mi.variant(), id(values), downsample, name)
+def table_kernel(values: np.ndarray, downsample: int = 1, name: str = "merl_table",
+                 cls: type[MerlTableKernel] = MerlTableKernel) -> MerlTableKernel:
+    """A MerlTableKernel (or `cls`) for a table array, reused while that very array is
+    alive: building one copies 1.5 M cells to the device, which costs more than a small
+    render."""
+    key = (mi.variant(), id(values), downsample, name, cls)
     hit = _TABLE_CACHE.get(key)
     if hit is not None and hit[0]() is values:
         return hit[1]
-    kernel = MerlTableKernel(values, downsample, name)
+    kernel = cls(values, downsample, name)
     if len(_TABLE_CACHE) >= _TABLE_CACHE_SIZE:
         _TABLE_CACHE.pop(next(iter(_TABLE_CACHE)))
     _TABLE_CACHE[key] = (weakref.ref(values), kernel)
@@ -349,8 +410,9 @@ def table_kernel(values: np.ndarray, downsample: int = 1, name: str = "merl_tabl
 
 
 def _merl_kernel(model) -> Kernel | None:
-    if model.mode != "nearest":
-        return None  # trilinear: the torch path
+    if model.mode == "trilinear":
+        return None if model.table is None else table_kernel(model.table.values, name="merl_trilinear",
+                                                              cls=MerlTrilinearKernel)
     if model.downsample == 1:
         if model.table is None:
             return None

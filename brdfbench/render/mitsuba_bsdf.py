@@ -2,7 +2,9 @@
 
 `register_plugins()` registers, for the current Mitsuba variant, a BSDF plugin named after
 each representation (`merl`, `ggx`, `nbrdf`, ..., third-party ones too); all are the same
-adapter class. Properties:
+adapter class. Mitsuba prefers its own plugins to registered ones, so a representation
+named like one of them (`diffuse`, `measured`, ...) is registered as `brdfbench_<name>`
+instead, with a warning (`plugin_name` says which). Properties:
 
 - `filename`: a brdfbench `.safetensors` model file (`brdfbench.modelio`), or
 - `model_id`: a handle to a live model, made by `bsdf_dict(model, rep_name=...)`;
@@ -44,6 +46,7 @@ raises `RenderError` naming the material and the representation.
 from __future__ import annotations
 
 import contextlib
+import warnings
 import weakref
 from pathlib import Path
 from typing import Any, Iterable
@@ -266,7 +269,7 @@ def _load_model(props, rep_name: str) -> tuple[Representation, str]:
         source = f"model file {path}"
         default = path.stem
     if name != rep_name:
-        raise ConfigError(f"BSDF {rep_name!r}: {source} holds a {name!r} model; use type={name!r}")
+        raise ConfigError(f"BSDF {rep_name!r}: {source} holds a {name!r} model; use type={plugin_name(name)!r}")
     return model, default
 
 
@@ -351,15 +354,32 @@ def adapter_class() -> type:
     return _CLASSES[variant]
 
 
+PLUGIN_PREFIX = "brdfbench_"
+
+
+def plugin_name(rep_name: str) -> str:
+    """The Mitsuba plugin name of a representation: its own name, or `brdfbench_<name>`
+    where Mitsuba has a plugin of that name (which would shadow a registered one)."""
+    if mi.variant() is None:
+        raise ConfigError("no Mitsuba variant is set; set one first (brdfbench.mitsuba_env.mitsuba_variant)")
+    builtin = mi.PluginManager.instance().plugin_type(rep_name) != mi.ObjectType.Unknown
+    return PLUGIN_PREFIX + rep_name if builtin else rep_name
+
+
 def register_plugins() -> list[str]:
     """Register one BSDF plugin per registered representation for the current variant
-    (idempotent; call again after registering more representations). Returns the names."""
+    (idempotent; call again after registering more representations). Returns the
+    representation names (see `plugin_name` for the plugins')."""
     cls = adapter_class()
     variant = mi.variant()
     names = registry.names("representations")
     for name in names:
         if (variant, name) not in _REGISTERED:
-            mi.register_bsdf(name, lambda props, name=name: _construct(cls, props, name))
+            plugin = plugin_name(name)
+            if plugin != name:
+                warnings.warn(f"representation {name!r} is named like Mitsuba's own plugin {name!r}, which would "
+                              f"shadow it: its BSDF is registered as {plugin!r}", stacklevel=2)
+            mi.register_bsdf(plugin, lambda props, name=name: _construct(cls, props, name))
             _REGISTERED.add((variant, name))
     return names
 
@@ -397,7 +417,8 @@ def bsdf_dict(model: Representation, *, rep_name: str, sampler: str = DEFAULT_SA
     variant is set."""
     handle = f"{rep_name}@{id(model):x}"
     _MODELS[handle] = (rep_name, model)
-    out: dict[str, Any] = {"type": rep_name, "model_id": handle, "sampler": sampler, "material": material or rep_name}
+    kind = plugin_name(rep_name) if mi.variant() is not None else rep_name
+    out: dict[str, Any] = {"type": kind, "model_id": handle, "sampler": sampler, "material": material or rep_name}
     if kernel != "auto":
         out["kernel"] = kernel
     for key, value in (sampler_params or {}).items():

@@ -34,7 +34,7 @@ from brdfbench import mitsuba_env, registry
 from brdfbench.testing.kit import reference_material
 
 RESOLUTION, SPP = 256, 16
-CASES = ("roughconductor", "merl", "nbrdf", "naive_mlp", "ggx", "cook_torrance", "lambert")
+CASES = ("roughconductor", "merl", "merl_trilinear", "nbrdf", "naive_mlp", "ggx", "cook_torrance", "lambert")
 INTEGRATORS = ("path", "direct_mis")
 ROUNDS, CYCLES = 5, 3
 
@@ -59,15 +59,18 @@ def bsdfs(mb) -> dict[str, dict]:
 
     out = {"roughconductor": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2}}
     for name in CASES[1:]:
-        spec = registry.get("representations", name)
+        rep = "merl" if name == "merl_trilinear" else name
+        spec = registry.get("representations", rep)
         if name in ("nbrdf", "naive_mlp"):
             model = spec.create()
             model.weights = mlp.glorot_init(model.hidden, torch.Generator().manual_seed(0))
+        elif name == "merl_trilinear":
+            model = spec.create(mode="trilinear").fit(reference_material())
         elif name in ("merl", "lambert"):
             model = spec.create().fit(reference_material())
         else:
             model = spec.create(n_samples=512, restarts=1).fit(reference_material())
-        out[name] = mb.bsdf_dict(model, rep_name=name)
+        out[name] = mb.bsdf_dict(model, rep_name=rep)
     return out
 
 
