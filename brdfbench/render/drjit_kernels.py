@@ -17,7 +17,10 @@ own symbolic kernels: no torch call, no host round trip, no per-bounce kernel la
       `dr.gather`), never Python float literals: literals are baked into the kernel's
       code, so every material would compile its own kernel;
     - only lanes with both directions strictly above the horizon matter; the adapter
-      zeroes the others and counts (and zeroes) non-finite values itself.
+      zeroes the others and counts (and zeroes) non-finite values itself;
+    - an array read by packet gathers (`dr.gather(mi.Vector4f, ...)`) must start on an
+      aligned address (`aligned_zeros`), or drjit silently splits the packet, and the
+      kernel then depends on where numpy's allocator put the array.
 (b) a built-in twin, matched by exact class (a subclass may change `_eval`): the MERL
     table (nearest cell, also downsampled, or trilinear) and PCA (a reconstructed MERL
     table) as table gathers, lambert, blinn_phong, cook_torrance, ggx, nbrdf and naive_mlp;
