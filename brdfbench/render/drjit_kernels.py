@@ -235,9 +235,10 @@ ATAN_COEFFICIENTS = _atan_coefficients()
 
 
 def atan_nonneg(y, x):
-    """atan2(y, x) for y, x ≥ 0 (not both 0), in [0, π/2]; absolute error ~2e-7 rad in fp32."""
+    """atan2(y, x) for y, x ≥ 0, in [0, π/2]; absolute error ~2e-7 rad in fp32. NaN for
+    y = x = 0: the callers send such (ill-posed) lanes to fp64."""
     big, small = dr.maximum(y, x), dr.minimum(y, x)
-    a = dr.select(big > 0, small / dr.select(big > 0, big, 1.0), 0.0)  # atan2(0, 0) = 0, as torch
+    a = small / big
     s = a * a
     r = ATAN_COEFFICIENTS[-1]
     for c in ATAN_COEFFICIENTS[-2:0:-1]:

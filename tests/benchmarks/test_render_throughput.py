@@ -18,7 +18,7 @@ compiles it). Measure with
     python -m pytest tests/benchmarks/test_render_throughput.py --benchmark-enable -s
 
 `test_render_throughput` gives pytest-benchmark's statistics per (integrator, BSDF);
-`test_throughput_ratios` renders every BSDF in turn, several cycles over (one scene alive
+`test_throughput_ratios` renders every BSDF in turn, six cycles over (one scene alive
 at a time: a symbolic call traces every live BSDF), and reports each one's best
 M samples/s and its ratios to `roughconductor` and `merl` in `extra_info`, so that the
 ratios come from one interleaved run.
@@ -36,7 +36,7 @@ from brdfbench.testing.kit import reference_material
 RESOLUTION, SPP = 256, 16
 CASES = ("roughconductor", "merl", "merl_trilinear", "nbrdf", "naive_mlp", "ggx", "cook_torrance", "lambert")
 INTEGRATORS = ("path", "direct_mis")
-ROUNDS, CYCLES = 5, 3
+ROUNDS, CYCLES = 5, 6
 
 pytestmark = pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="llvm_ad_rgb needs libLLVM >= 19")
 
