@@ -15,10 +15,11 @@ import pytest
 import torch
 from scipy import stats
 
-from brdfbench import mitsuba_env, scenes
+from brdfbench import mitsuba_env, registry, scenes
 from brdfbench.render.camera import Camera
 from brdfbench.render.simulate import build_simulator
 from brdfbench.render.simulator import sphere_hits
+from brdfbench.testing.kit import reference_material
 from brdfbench_representations.analytic import GGX
 from brdfbench_representations.lambert import Lambert
 
@@ -139,9 +140,6 @@ def test_the_direct_bsdf_call_renders_as_the_virtual_call(kind, monkeypatch):
     """A one-shape scene calls its BSDF directly (no dispatch); forcing Mitsuba's per-lane
     virtual call instead renders the same image, for a table, an MLP and an analytic model."""
     from brdfbench.render import mitsuba_sim
-    from brdfbench.testing.kit import reference_material
-
-    from brdfbench import registry
 
     table = registry.get("representations", "merl").create().fit(reference_material())
     mlp = registry.get("representations", "nbrdf").create(epochs=1, n_samples=20_000).fit(reference_material())

@@ -344,11 +344,16 @@ def _define_class(base: type) -> type:
     return BrdfbenchBSDF
 
 
-def adapter_class() -> type:
-    """The adapter's mi.BSDF subclass for the current variant."""
+def _current_variant() -> str:
     variant = mi.variant()
     if variant is None:
         raise ConfigError("no Mitsuba variant is set; set one first (brdfbench.mitsuba_env.mitsuba_variant)")
+    return variant
+
+
+def adapter_class() -> type:
+    """The adapter's mi.BSDF subclass for the current variant."""
+    variant = _current_variant()
     if variant not in _CLASSES:
         _CLASSES[variant] = _define_class(mi.BSDF)
     return _CLASSES[variant]
@@ -360,8 +365,7 @@ PLUGIN_PREFIX = "brdfbench_"
 def plugin_name(rep_name: str) -> str:
     """The Mitsuba plugin name of a representation: its own name, or `brdfbench_<name>`
     where Mitsuba has a plugin of that name (which would shadow a registered one)."""
-    if mi.variant() is None:
-        raise ConfigError("no Mitsuba variant is set; set one first (brdfbench.mitsuba_env.mitsuba_variant)")
+    _current_variant()
     builtin = mi.PluginManager.instance().plugin_type(rep_name) != mi.ObjectType.Unknown
     return PLUGIN_PREFIX + rep_name if builtin else rep_name
 
