@@ -20,5 +20,5 @@ if [ ! -x .venv/bin/python ]; then
 fi
 # torch first and pinned: the 2.13.0 CPU build. An unpinned torch would pull a CUDA build.
 .venv/bin/python -m pip install -q --disable-pip-version-check torch==2.13.0
-.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test]"
+.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test,launchers]"
 echo "setup: done ($(.venv/bin/python -c 'import brdfbench, torch; print("brdfbench", brdfbench.__version__, "torch", torch.__version__)'))"

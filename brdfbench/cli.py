@@ -10,12 +10,17 @@ leaderboard). Subcommands that need no config:
     brdfbench inspect MODEL.safetensors describe a saved model (loads no code)
     brdfbench convert SRC DEST          convert neural-BRDF weights between formats
                                         (.h5, .npy 675-vector, .pt state_dict, .safetensors)
+
+`brdfbench --help` lists these and the config groups; `--version` prints the version;
+`--hydra-help` is Hydra's own help. Output cut short by a closed pipe (`brdfbench list |
+head`) ends quietly, as other command-line tools do.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -23,6 +28,7 @@ from .errors import BrdfbenchError
 
 SUBCOMMANDS = ("list", "report", "check", "inspect", "convert")
 EXIT_ERROR = 2
+EXIT_BROKEN_PIPE = 128 + 13  # as a process killed by SIGPIPE
 
 
 def _fail(message: str) -> int:
@@ -55,7 +61,7 @@ def cmd_report(args) -> int:
 def cmd_check(args) -> int:
     from .testing import check_representation
 
-    report = check_representation(args.name, n_pairs=args.pairs)
+    report = check_representation(args.name, n_pairs=args.pairs, full=args.full)
     print(report.summary())
     return 0 if report.passed else 1
 
@@ -74,7 +80,7 @@ def cmd_inspect(args) -> int:
 
 def cmd_convert(args) -> int:
     try:
-        from brdfbench_representations.nbrdf_formats import read_network, write_network
+        from .nbrdf.formats import read_network, write_network
     except ImportError as exc:  # the built-in plugins are part of the package, but say so if missing
         return _fail(f"convert needs the built-in representations ({exc})")
 
@@ -97,6 +103,8 @@ def _subcommand_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("check", help="run the conformance kit on a registered representation")
     p.add_argument("name")
     p.add_argument("--pairs", type=int, default=10**6, help="adversarial direction pairs per dtype (default 1e6)")
+    p.add_argument("--full", action="store_true",
+                   help="fit with the representation's default parameters, not its quick check_params")
     p.set_defaults(func=cmd_check)
     p = sub.add_parser("inspect", help="describe a saved model file")
     p.add_argument("path")
@@ -112,18 +120,57 @@ def _subcommand_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+def _help_text() -> str:
+    """The subcommand parser's help, with the benchmark usage and the config groups around it."""
+    from .cli_help import USAGE, config_help
+
+    parser = _subcommand_parser()
+    parser.usage = USAGE
+    parser.description = "Benchmark BRDF representations: fit, measure accuracy and cost, write a leaderboard."
+    parser.epilog = config_help()
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    return parser.format_help()
+
+
+def _closed_pipe() -> int:
+    """stdout's reader went away (`brdfbench list | head`): stop quietly, as CLI tools do."""
+    try:  # Python flushes stdout again at exit; point it at /dev/null so that flush cannot fail
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    return EXIT_BROKEN_PIPE
+
+
+def _dispatch(argv: list[str]) -> int:
     if argv and argv[0] in SUBCOMMANDS:
         args = _subcommand_parser().parse_args(argv)
         try:
             return args.func(args)
         except BrdfbenchError as exc:
             return _fail(str(exc))
+    if "--version" in argv:
+        from . import __version__
+
+        print(f"brdfbench {__version__}")
+        return 0
+    if "-h" in argv or "--help" in argv:
+        print(_help_text(), end="")
+        return 0
     from .hydra_app import run_hydra
 
     return run_hydra(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        status = _dispatch(argv)
+        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's final flush
+    except BrokenPipeError:
+        return _closed_pipe()
+    return status
 
 
 if __name__ == "__main__":

@@ -1,75 +1,56 @@
-"""Hydra entry: compose the packaged configs into a RunConfig, run the job, write the report."""
+"""Hydra entry: compose the packaged configs into a RunConfig and run the job.
+
+Every invocation is a Hydra multirun (one job or a sweep): `brdfbench.hydra_callbacks`
+validates every job before the first starts and writes the report once at the end. A
+job records its counts (or its error) in `brdfbench_job.json` in its Hydra output folder,
+so the end of the sweep knows how it went whichever launcher ran the jobs.
+"""
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
+from typing import Any
 
 import hydra
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
-from .errors import BrdfbenchError, ConfigError
-from .runner import HarnessConfig, RunConfig, run
+from .errors import BrdfbenchError
+from .hydra_callbacks import finish
+from .hydra_config import JOB_SUMMARY, to_run_config, write_summary
 
-
-def _section(cfg: DictConfig, key: str) -> dict:
-    node = OmegaConf.select(cfg, key, throw_on_missing=False)
-    if node is None:
-        return {}
-    try:
-        return OmegaConf.to_container(node, resolve=True, throw_on_missing=True)
-    except Exception as exc:  # omegaconf's MissingMandatoryValue and interpolation errors name the key
-        raise ConfigError(f"config key {key}: {exc}".splitlines()[0]) from None
-
-
-def to_run_config(cfg: DictConfig) -> RunConfig:
-    rep = _section(cfg, "representation")
-    ds = _section(cfg, "dataset")
-    harness = _section(cfg, "harness")
-    scene = _section(cfg, "scene")
-    for key, section in (("representation", rep), ("dataset", ds)):
-        if "name" not in section:
-            raise ConfigError(f"config key {key}.name is missing")
-    known = set(HarnessConfig.__dataclass_fields__)
-    for key in harness:
-        if key not in known:
-            raise ConfigError(f"unknown config key harness.{key}; known: {', '.join(sorted(known))}")
-    harness["metrics"] = tuple(harness.get("metrics", HarnessConfig.metrics))
-    if isinstance(harness.get("sampler_params"), dict):  # a harness yaml may declare sampler keys as null: unset
-        harness["sampler_params"] = {k: v for k, v in harness["sampler_params"].items() if v is not None}
-    materials = cfg.get("materials")
-    return RunConfig(
-        representation=rep["name"],
-        representation_params=rep.get("params") or {},
-        label=rep.get("label") or rep["name"],
-        dataset=ds["name"],
-        dataset_params=ds.get("params") or {},
-        harness=HarnessConfig(**harness),
-        scene=scene.get("name", "brdf_space"),
-        scene_params=scene.get("params") or {},
-        materials=tuple(materials) if materials else None,
-        limit=cfg.get("limit"),
-        seed=int(cfg.seed),
-        results_dir=Path(cfg.results_dir),
-        save_models=bool(cfg.save_models),
-    )
+__all__ = ["JOB_SUMMARY", "run_hydra", "to_run_config"]
 
 
 @hydra.main(version_base="1.3", config_path="pkg://brdfbench_conf", config_name="config")
 def _app(cfg: DictConfig) -> None:
-    from .report import write_reports
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
 
+    from .runner import run
+
+    hc = HydraConfig.get()
+    multirun = hc.mode == RunMode.MULTIRUN
+    job = str(hc.job.num) if multirun else ""
+    summary: dict[str, Any] = {"job": job, "overrides": list(hc.overrides.task),
+                               "sweep": os.environ.get("BRDFBENCH_SWEEP_ID")}
     try:
-        run_cfg = to_run_config(cfg)
+        run_cfg = to_run_config(cfg, job=job)
+        summary["results_dir"] = str(run_cfg.results_dir)
         counts = run(run_cfg)
-        paths = write_reports(run_cfg.results_dir)
+        summary.update(counts, label=run_cfg.label)
+        print(f"{run_cfg.label}: {counts['done']} done, {counts['skipped']} already in the store, "
+              f"{counts['failed']} failed", flush=True)
     except BrdfbenchError as exc:
-        print(f"brdfbench: error: {exc}", file=sys.stderr)
-        raise SystemExit(2) from None
-    print(
-        f"{run_cfg.label}: {counts['done']} done, {counts['skipped']} already in the store, "
-        f"{counts['failed']} failed; leaderboard: {paths[0]}"
-    )
+        print(f"brdfbench: error: {exc}", file=sys.stderr, flush=True)
+        summary["error"] = str(exc)
+        if not multirun:
+            raise SystemExit(2) from None
+    finally:
+        write_summary(Path(hc.runtime.output_dir), summary)
+    if not multirun:
+        raise SystemExit(finish([summary]))
 
 
 def run_hydra(argv: list[str]) -> int:

@@ -3,13 +3,18 @@
 One `.safetensors` file per model: the tensors of `state_dict()`, and in the safetensors
 header metadata a JSON document with the plugin name, its params, its metadata and the
 package version. Loading parses that header and the raw tensor bytes only: it never runs
-code. A pickle or a torch.save archive is refused with a clear error.
+code. A pickle or a torch.save archive is refused with a clear error, and so is a header
+that does not fit a registered representation (unknown name, params its constructor does
+not take, tensors its `from_state` needs but the file lacks): a `ModelFileError` naming
+the file.
 """
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
+import traceback
 from pathlib import Path
 
 import safetensors.torch
@@ -17,7 +22,7 @@ import torch
 
 from . import __version__, registry
 from .atomic import replacing
-from .errors import ModelFileError
+from .errors import ModelFileError, PluginError
 from .protocol import Representation
 
 _FORMAT = "brdfbench.model/1"
@@ -76,8 +81,84 @@ def load(path: str | os.PathLike) -> tuple[str, Representation]:
         name, params, extra = header["representation"], header["params"], header["metadata"]
     except (KeyError, ValueError, TypeError) as exc:
         raise ModelFileError(f"{path}: safetensors file lacks brdfbench metadata (key {exc})") from None
-    cls = registry.get("representations", name).load()
-    return name, cls.from_state(params, tensors, extra)
+    for key, value, kind in (("representation", name, str), ("params", params, dict), ("metadata", extra, dict)):
+        if not isinstance(value, kind):
+            raise ModelFileError(f"{path}: brdfbench metadata key {key!r} must be a {kind.__name__}, got {value!r}")
+    cls = _representation_class(path, name)
+    _check_params(path, name, cls, params)
+    return name, _rebuild(path, name, cls, params, tensors, extra)
+
+
+def _representation_class(path: Path, name: str) -> type[Representation]:
+    """The class registered as `name`; an unknown name is the file's fault, named with the known ones."""
+    try:
+        spec = registry.get("representations", name)
+    except PluginError as exc:
+        raise ModelFileError(f"{path}: the file names representation {name!r}, which is not registered: {exc}") from None
+    return spec.load()
+
+
+def _check_params(path: Path, name: str, cls: type, params: dict) -> None:
+    """Refuse params the constructor does not take (or lacks), naming them and what it takes."""
+    try:
+        signature = inspect.signature(cls)
+    except (TypeError, ValueError):  # no introspectable signature: let the constructor judge
+        return
+    taken = [p.name for p in signature.parameters.values() if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    takes = ", ".join(taken) if taken else "no params"
+    if not any(p.kind is p.VAR_KEYWORD for p in signature.parameters.values()):
+        unknown = [k for k in params if k not in taken]
+        if unknown:
+            raise ModelFileError(
+                f"{path}: representation {name!r} takes no param(s) {', '.join(map(repr, unknown))}; "
+                f"it takes: {takes}. The file was saved by another representation or version"
+            )
+    try:
+        signature.bind(**params)
+    except TypeError as exc:
+        raise ModelFileError(f"{path}: params {params} do not fit representation {name!r} ({exc}); it takes: {takes}") from None
+
+
+class _Tensors(dict):
+    """The file's tensors; remembers which ones `from_state` asked for and the file lacks."""
+
+    def __init__(self, tensors: dict[str, torch.Tensor]):
+        super().__init__(tensors)
+        self.missing: list[str] = []
+
+    def __missing__(self, key):
+        self.missing.append(key)
+        raise KeyError(key)
+
+
+def _expected_tensors(cls: type, params: dict) -> list[str]:
+    """Tensor names a fresh model of `cls` has (a hint for the error message only)."""
+    try:
+        return list(cls(**params).state_dict())
+    except Exception:
+        return []
+
+
+def _rebuild(path: Path, name: str, cls: type, params: dict, tensors: dict, extra: dict) -> Representation:
+    """`cls.from_state`, with a malformed or mismatched file reported as a ModelFileError naming it."""
+    held = _Tensors(tensors)
+    try:
+        return cls.from_state(params, held, extra)
+    except ModelFileError as exc:
+        message = str(exc)
+        raise ModelFileError(message if str(path) in message else f"{path}: {message}") from None
+    except (KeyError, TypeError, ValueError, IndexError, RuntimeError) as exc:
+        holds = ", ".join(map(repr, tensors)) or "none"
+        if held.missing:
+            missing = list(dict.fromkeys([*held.missing, *(k for k in _expected_tensors(cls, params) if k not in tensors)]))
+            raise ModelFileError(
+                f"{path}: lacks tensor(s) {', '.join(map(repr, missing))} that representation {name!r} needs; "
+                f"the file holds: {holds}. Was it saved by another representation?"
+            ) from None
+        detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+        raise ModelFileError(
+            f"{path}: representation {name!r} cannot be rebuilt from this file ({detail}); the file holds tensors: {holds}"
+        ) from None
 
 
 def load_torch_weights(path: str | os.PathLike) -> dict[str, torch.Tensor]:

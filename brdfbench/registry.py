@@ -1,6 +1,7 @@
 """Lazy plugin registry over Python entry points.
 
-Groups: brdfbench.representations, .generators, .metrics, .datasets, .scenes. Built-ins
+Groups: brdfbench.representations, .generators, .metrics, .datasets, .scenes, .samplers,
+.harnesses, .reports. Built-ins
 register through the same groups a third party uses; the core imports no plugin by name.
 Entry points are listed without importing anything; a spec is imported on first use.
 """
@@ -12,7 +13,8 @@ from functools import lru_cache
 from importlib.metadata import EntryPoint, entry_points
 
 from .errors import PluginError
-from .specs import DatasetSpec, GeneratorSpec, MetricSpec, PluginSpec, RepresentationSpec, SamplerSpec, SceneSpec
+from .specs import (DatasetSpec, GeneratorSpec, HarnessSpec, MetricSpec, PluginSpec, ReportSpec, RepresentationSpec,
+                    SamplerSpec, SceneSpec)
 
 GROUPS: dict[str, type[PluginSpec]] = {
     "representations": RepresentationSpec,
@@ -21,7 +23,11 @@ GROUPS: dict[str, type[PluginSpec]] = {
     "datasets": DatasetSpec,
     "scenes": SceneSpec,
     "samplers": SamplerSpec,
+    "harnesses": HarnessSpec,
+    "reports": ReportSpec,
 }
+
+SINGULAR = {"harnesses": "harness"}
 
 _extra: dict[str, dict[str, PluginSpec]] = {g: {} for g in GROUPS}
 
@@ -67,7 +73,8 @@ def get(group: str, name: str) -> PluginSpec:
         known = names(group)
         close = difflib.get_close_matches(name, known, n=3, cutoff=0.5)
         hint = f" Did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
-        raise PluginError(f"unknown {group[:-1]} {name!r}.{hint} Registered: {', '.join(known) or 'none'}.")
+        raise PluginError(f"unknown {SINGULAR.get(group, group[:-1])} {name!r}.{hint} "
+                          f"Registered: {', '.join(known) or 'none'}.")
     try:
         spec = eps[name].load()
     except Exception as exc:  # a broken third-party plugin must not look like a core bug
@@ -82,3 +89,25 @@ def get(group: str, name: str) -> PluginSpec:
 
 def all_specs(group: str) -> list[PluginSpec]:
     return [get(group, n) for n in names(group)]
+
+
+def version(group: str, name: str) -> str:
+    """The version of the distribution that registers `name` ("in-process" for `register`ed specs)."""
+    _check_group(group)
+    if name in _extra[group]:
+        return "in-process"
+    ep = _entry_points(group).get(name)
+    dist = getattr(ep, "dist", None)
+    return str(getattr(dist, "version", "") or "unknown")
+
+
+def snapshot() -> dict[str, dict[str, PluginSpec]]:
+    """The in-process registrations, to hand to a worker process (entry points it finds itself)."""
+    return {g: dict(specs) for g, specs in _extra.items() if specs}
+
+
+def restore(extra: dict[str, dict[str, PluginSpec]]) -> None:
+    """Re-register a `snapshot()` in this process (a worker's start)."""
+    for group, specs in extra.items():
+        for spec in specs.values():
+            register(group, spec)

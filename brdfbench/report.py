@@ -1,31 +1,24 @@
-"""Write the leaderboard files for a results folder."""
+"""Write the reports of a results folder: every registered report plugin (`brdfbench.reports`,
+the built-in is the Markdown leaderboard) renders the store's rows into files there."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from .atomic import replacing
+from . import registry
 from .errors import DataError
 from .store import ResultsStore
 
 
 def write_reports(results_dir: Path) -> list[Path]:
-    """Regenerate `leaderboard.md` in `results_dir` from its store, with its figures (the
-    convergence plots, PNG) beside it; returns the paths written, the leaderboard first."""
-    from brdfbench_leaderboard.markdown import render
-    from brdfbench_leaderboard.plots import convergence_figures
-
-    db = results_dir / "brdfbench.sqlite"
+    """Regenerate every report of `results_dir` from its store; returns the paths written,
+    the Markdown leaderboard first where it is registered."""
+    db = Path(results_dir) / "brdfbench.sqlite"
     if not db.is_file():
         raise DataError(f"{db}: no results store here (run the benchmark first)")
     df = ResultsStore(db).frame()
-    figures = []
-    for name, figure in convergence_figures(df).items():
-        with replacing(results_dir / name) as tmp:
-            figure.savefig(tmp, format="png", dpi=120)
-        figures.append(results_dir / name)
-    md = results_dir / "leaderboard.md"
-    text = render(df, str(db), plots={p.name for p in figures})
-    with replacing(md) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-    return [md, *figures]
+    names = sorted(registry.names("reports"), key=lambda n: (n != "markdown", n))
+    paths: list[Path] = []
+    for name in names:
+        paths += registry.get("reports", name).load()(df, Path(results_dir), str(db))
+    return paths

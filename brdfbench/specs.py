@@ -47,6 +47,10 @@ class PluginSpec:
 class RepresentationSpec(PluginSpec):
     """A BRDF representation; `target` is a `brdfbench.protocol.Representation` subclass."""
 
+    #: constructor arguments of the conformance kit's quick run (e.g. a short training recipe),
+    #: so that it fits in seconds; the kit's full run uses the representation's defaults.
+    check_params: Mapping[str, Any] = field(default_factory=dict)
+
     def create(self, **params: Any):
         return self.load()(**params)
 
@@ -72,6 +76,16 @@ class MetricSpec(PluginSpec):
 @dataclass(frozen=True)
 class SceneSpec(PluginSpec):
     """A scene: what it contains decides which simulator evaluates it."""
+
+
+@dataclass(frozen=True)
+class HarnessSpec(PluginSpec):
+    """A harness; `target` is a `brdfbench.harness.Harness` subclass (typed config, validation, measuring)."""
+
+
+@dataclass(frozen=True)
+class ReportSpec(PluginSpec):
+    """A report; `target` is a callable (results frame, results folder, store name) -> paths written."""
 
 
 @dataclass(frozen=True)

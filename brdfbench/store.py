@@ -1,52 +1,45 @@
-"""The results store: typed rows in SQLite, written atomically per benchmark cell.
+"""The results store: typed rows in SQLite, one transaction per benchmark cell.
 
-A cell is one (representation label, config hash, dataset fingerprint, material): all of
-its rows are inserted in one transaction, so a crash never leaves half a cell. A re-run
-skips cells that already hold successful rows; failed cells are retried.
+Schema v2 (`PRAGMA user_version = 2`):
+- `configs`: config hash → label, plugin, its version, harness, and the resolved
+  parameters behind the hash (JSON), so two configurations never share a row;
+- `environments`: where figures were measured (host, CPU model, cores, threads, launcher);
+- `results`: one row per (configuration, dataset fingerprint, scope, material or set,
+  metric, spp) — a unique key, so concurrent writers cannot duplicate a cell — with typed
+  scene / sampler / spp / scope columns and the environment and concurrency of its cell.
+
+A cell is (config hash, dataset fingerprint, scope, material): `write_cell` replaces a
+failed cell and leaves a finished one as it is (the first complete writer wins), so
+writing is idempotent. Stores written by v1 (no user_version) migrate in one transaction.
+A store that cannot be read or written is a DataError naming the file and what to do.
 """
 
 from __future__ import annotations
 
+import json
+import math
 import sqlite3
 import time
-from contextlib import closing
+from contextlib import closing, contextmanager
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
+from typing import Any, Iterator
 
 import pandas as pd
 
-SCHEMA = """
-CREATE TABLE IF NOT EXISTS results (
-    run_id TEXT NOT NULL,
-    representation TEXT NOT NULL,
-    dataset TEXT NOT NULL,
-    dataset_fingerprint TEXT NOT NULL,
-    material TEXT NOT NULL,
-    category TEXT NOT NULL,
-    metric TEXT NOT NULL,
-    value REAL,
-    unit TEXT NOT NULL,
-    higher_is_better INTEGER NOT NULL,
-    status TEXT NOT NULL,
-    message TEXT NOT NULL,
-    seed INTEGER NOT NULL,
-    config_hash TEXT NOT NULL,
-    package_version TEXT NOT NULL,
-    git_sha TEXT NOT NULL,
-    timestamp REAL NOT NULL,
-    scene TEXT NOT NULL DEFAULT 'brdf_space'
-);
-CREATE INDEX IF NOT EXISTS cell ON results (representation, config_hash, dataset_fingerprint, material);
-"""
+from .errors import DataError
+from .store_migrations import migrate_v1
+from .store_schema import SCHEMA, SCHEMA_VERSION, UNKNOWN_ENV
+
 
 
 @dataclass(frozen=True)
 class Row:
     run_id: str
-    representation: str
+    config_hash: str
     dataset: str
     dataset_fingerprint: str
-    material: str
+    material: str  # the material, or the set's name for scope="set"
     category: str
     metric: str
     value: float | None
@@ -55,69 +48,225 @@ class Row:
     status: str  # "ok" or "failed"
     message: str
     seed: int
-    config_hash: str
     package_version: str
     git_sha: str
     timestamp: float
-    scene: str = "brdf_space"  # the scene the metrics were measured in (brdf_space: no rendering)
+    scene: str = "brdf_space"  # the scene the metric was measured in (brdf_space: no rendering)
+    sampler: str = ""  # the importance sampler of a Monte Carlo figure, else ""
+    spp: int = 0  # samples per pixel of a per-rung figure (convergence), else 0
+    scope: str = "material"  # "material": one material's figure; "set": a whole set's
+    env_id: str = UNKNOWN_ENV
+    concurrent_jobs: int = 1  # brdfbench cells running on this host while this one ran (itself included)
+
+
+@dataclass(frozen=True)
+class ConfigRecord:
+    config_hash: str
+    label: str
+    plugin: str
+    plugin_version: str
+    harness: str
+    params: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class Environment:
+    env_id: str
+    host: str
+    cpu_model: str
+    cpu_count: int
+    threads: int
+    launcher: str
+    platform: str
 
 
 COLUMNS = [f.name for f in fields(Row)]
+CELL = ("config_hash", "dataset_fingerprint", "scope", "material")
 
 
 class ResultsStore:
+    """One SQLite file; every method opens its own connection (safe across processes)."""
+
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        with closing(self._connect()) as con, con:
-            con.executescript(SCHEMA)
-            have = {row[1] for row in con.execute("PRAGMA table_info(results)")}
-            if "scene" not in have:  # a store written before scenes were rendered
-                con.execute("ALTER TABLE results ADD COLUMN scene TEXT NOT NULL DEFAULT 'brdf_space'")
+        if self.path.is_dir():
+            raise DataError(f"{self.path}: the results store path is a directory; give a file path")
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise DataError(f"{self.path.parent}: cannot create the results folder ({exc.strerror})") from None
+        with self._connection() as con:  # no WAL switch before the file is known to be a store
+            self._open(con)
+        with self._connection(write=True):
+            pass
 
-    def _connect(self) -> sqlite3.Connection:
-        con = sqlite3.connect(self.path, timeout=120)
-        con.execute("PRAGMA journal_mode=WAL")
-        return con
-
-    def has_cell(self, representation: str, config_hash: str, dataset_fingerprint: str, material: str) -> bool:
-        with closing(self._connect()) as con:
-            cur = con.execute(
-                "SELECT 1 FROM results WHERE representation=? AND config_hash=? AND dataset_fingerprint=?"
-                " AND material=? AND status='ok' LIMIT 1",
-                (representation, config_hash, dataset_fingerprint, material),
-            )
-            return cur.fetchone() is not None
-
-    def write_cell(self, rows: list[Row]) -> None:
-        """Insert one cell's rows atomically, replacing earlier failed rows of that cell."""
-        if not rows:
+    def _open(self, con: sqlite3.Connection) -> None:
+        """Check the schema; create it in an empty file, migrate an older one."""
+        version = con.execute("PRAGMA user_version").fetchone()[0]
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if version == SCHEMA_VERSION:
+            missing = {"configs", "environments", "results"} - tables
+            if missing:
+                raise DataError(f"{self.path}: schema v{version} store lacks table(s) {', '.join(sorted(missing))}; "
+                                "move it aside and run again")
             return
-        keys = {(r.representation, r.config_hash, r.dataset_fingerprint, r.material) for r in rows}
+        if version > SCHEMA_VERSION:
+            raise DataError(f"{self.path}: written by a newer brdfbench (schema v{version}, this one reads up to "
+                            f"v{SCHEMA_VERSION}); upgrade brdfbench or use another results folder")
+        if version != 0:
+            raise DataError(f"{self.path}: unknown store schema v{version}; move it aside and run again")
+        if not tables:
+            con.execute("BEGIN IMMEDIATE")  # another process may be creating it right now: look again under the lock
+            try:
+                if not con.execute("SELECT 1 FROM sqlite_master WHERE type='table' LIMIT 1").fetchone():
+                    for statement in SCHEMA.split(";"):
+                        if statement.strip():
+                            con.execute(statement)
+                    con.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            except BaseException:
+                con.execute("ROLLBACK")
+                raise
+            con.execute("COMMIT")
+            self._open(con)
+        elif "results" in tables and "configs" not in tables:
+            migrate_v1(con, self.path)
+        else:
+            raise DataError(f"{self.path}: an SQLite file that is not a brdfbench results store (tables: "
+                            f"{', '.join(sorted(tables))}); move it aside or choose another results_dir")
+
+    # -- connections -------------------------------------------------------------
+    @contextmanager
+    def _connection(self, write: bool = False) -> Iterator[sqlite3.Connection]:
+        """A connection with WAL and a long busy timeout; SQLite faults become DataErrors naming the file."""
+        try:
+            with closing(sqlite3.connect(self.path, timeout=120, isolation_level=None)) as con:
+                if write:
+                    mode = con.execute("PRAGMA journal_mode=WAL").fetchone()[0]
+                    if mode.lower() != "wal":  # e.g. a read-only folder: WAL needs its -wal and -shm files
+                        con.execute("PRAGMA journal_mode=DELETE")
+                yield con
+        except (sqlite3.IntegrityError, sqlite3.ProgrammingError, sqlite3.InterfaceError):  # the writer's bug, not the file's
+            raise
+        except sqlite3.DatabaseError as exc:
+            raise _store_error(self.path, exc) from None
+
+    @contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Connection]:
+        with self._connection(write=True) as con:
+            con.execute("BEGIN IMMEDIATE")
+            try:
+                yield con
+            except BaseException:
+                con.execute("ROLLBACK")
+                raise
+            con.execute("COMMIT")
+
+    # -- configurations and environments ----------------------------------------------
+    def write_config(self, record: ConfigRecord) -> None:
+        """Record what a config hash stands for (the label follows the latest run)."""
+        with self._transaction() as con:
+            con.execute(
+                "INSERT INTO configs VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT(config_hash) DO UPDATE SET label=excluded.label,"
+                " plugin=excluded.plugin, plugin_version=excluded.plugin_version, harness=excluded.harness,"
+                " params=excluded.params",
+                (record.config_hash, record.label, record.plugin, record.plugin_version, record.harness,
+                 json.dumps(record.params, sort_keys=True, default=str)),
+            )
+
+    def write_environment(self, env: Environment) -> None:
+        with self._transaction() as con:
+            con.execute("INSERT OR IGNORE INTO environments VALUES (?, ?, ?, ?, ?, ?, ?)", tuple(asdict(env).values()))
+
+    def configs(self) -> pd.DataFrame:
+        with self._connection() as con:
+            df = pd.read_sql_query("SELECT * FROM configs", con)
+        return df
+
+    # -- cells -------------------------------------------------------------------
+    def done_cells(self, config_hash: str, dataset_fingerprint: str, scope: str = "material") -> set[str]:
+        """Materials (or sets) of this configuration and data that hold successful rows."""
+        with self._connection() as con:
+            cur = con.execute(
+                "SELECT DISTINCT material FROM results WHERE config_hash=? AND dataset_fingerprint=? AND scope=?"
+                " AND status='ok'", (config_hash, dataset_fingerprint, scope))
+            return {r[0] for r in cur}
+
+    def has_cell(self, config_hash: str, dataset_fingerprint: str, material: str, scope: str = "material") -> bool:
+        return material in self.done_cells(config_hash, dataset_fingerprint, scope)
+
+    def write_cell(self, rows: list[Row]) -> bool:
+        """Insert one cell's rows in one transaction; returns False when the cell was already done.
+
+        Earlier failed rows of the cell are replaced; a finished cell is kept (first writer wins)."""
+        if not rows:
+            return False
+        keys = {tuple(getattr(r, k) for k in CELL) for r in rows}
         if len(keys) != 1:
             raise ValueError(f"write_cell takes the rows of one cell, got {len(keys)} cells")
-        with closing(self._connect()) as con, con:
-            con.execute(
-                "DELETE FROM results WHERE representation=? AND config_hash=? AND dataset_fingerprint=?"
-                " AND material=? AND status='failed'",
-                next(iter(keys)),
-            )
+        key = next(iter(keys))
+        where = " AND ".join(f"{k}=?" for k in CELL)
+        with self._transaction() as con:
+            if con.execute(f"SELECT 1 FROM results WHERE {where} AND status='ok' LIMIT 1", key).fetchone():
+                return False
+            con.execute(f"DELETE FROM results WHERE {where}", key)
             con.executemany(
                 f"INSERT INTO results ({', '.join(COLUMNS)}) VALUES ({', '.join('?' * len(COLUMNS))})",
                 [tuple(asdict(r).values()) for r in rows],
             )
+        return True
 
-    def frame(self, **where: str) -> pd.DataFrame:
-        """All rows (optionally filtered by column equality) as a DataFrame."""
+    # -- reading -----------------------------------------------------------------
+    def frame(self, **where: Any) -> pd.DataFrame:
+        """All rows (optionally filtered by column equality) with their configuration and
+        environment: `representation` is the configuration's label, `params` its JSON."""
         unknown = set(where) - set(COLUMNS)
         if unknown:
             raise KeyError(f"unknown results column(s): {', '.join(sorted(unknown))}")
-        clause = " AND ".join(f"{k}=?" for k in where)
-        sql = "SELECT * FROM results" + (f" WHERE {clause}" if clause else "")
-        with closing(self._connect()) as con:
+        clause = " AND ".join(f"r.{k}=?" for k in where)
+        sql = ("SELECT r.rowid AS row_id, r.*, COALESCE(c.label, r.config_hash) AS representation,"
+               " COALESCE(c.plugin, '') AS plugin, COALESCE(c.plugin_version, '') AS plugin_version,"
+               " COALESCE(c.harness, '') AS harness, COALESCE(c.params, 'null') AS params,"
+               " COALESCE(e.host, '') AS host, COALESCE(e.cpu_model, '') AS cpu_model,"
+               " COALESCE(e.cpu_count, 0) AS cpu_count, COALESCE(e.threads, 0) AS threads,"
+               " COALESCE(e.launcher, '') AS launcher"
+               " FROM results r LEFT JOIN configs c ON c.config_hash = r.config_hash"
+               " LEFT JOIN environments e ON e.env_id = r.env_id" + (f" WHERE {clause}" if clause else ""))
+        with self._connection() as con:
             df = pd.read_sql_query(sql, con, params=tuple(where.values()))
+        _check_values(df, self.path)
+        df["value"] = pd.to_numeric(df["value"]).astype(float)
         df["higher_is_better"] = df["higher_is_better"].astype(bool)
         return df
+
+
+def _check_values(df: pd.DataFrame, path: Path) -> None:
+    """A value that is not a number (SQLite stores any type) is a damaged store, named by row."""
+    for row_id, value in zip(df["row_id"], df["value"]):
+        if value is None or (isinstance(value, (int, float)) and not isinstance(value, bool)):
+            continue
+        raise DataError(f"{path}: row {row_id} holds a non-numeric value {value!r}; "
+                        "the store is damaged: move it aside and run again")
+
+
+def _store_error(path: Path, exc: sqlite3.DatabaseError) -> DataError:
+    """One line naming the store and what to do, for SQLite's faults."""
+    text = str(exc)
+    low = text.lower()
+    if "disk is full" in low or "disk i/o" in low:
+        hint = "free disk space and run again (the store was left as it was)"
+    elif "readonly" in low or "read-only" in low or "unable to open" in low:
+        hint = "the store or its folder is not writable: fix the permissions or choose another results_dir"
+    elif "not a database" in low or "malformed" in low or "corrupt" in low:
+        hint = "the file is damaged or not a brdfbench store: move it aside and run again"
+    elif "locked" in low or "busy" in low:
+        hint = "another process holds the store locked; wait for it, or use another results_dir"
+    else:
+        hint = "move it aside and run again"
+    return DataError(f"{path}: results store error ({text}); {hint}")
+
+
+def finite(value: float | None) -> bool:
+    return value is not None and math.isfinite(value)
 
 
 def now() -> float:

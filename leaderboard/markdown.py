@@ -22,7 +22,12 @@ COST_LABELS = {
     "flops_per_eval": "FLOP/eval ↓",
     "render_time": "render time (s) ↓",
     "render_samples_per_s": "render samples/s ↑",
+    "peak_rss_fit": "peak memory, fit (B) ↓",
+    "peak_rss_eval": "peak memory, eval (B) ↓",
+    "peak_rss_train": "peak memory, train (B) ↓",
 }
+#: Marks a timing measured while other brdfbench jobs ran on the same host.
+CONTENDED = "†"
 
 
 #: Caveats printed under a dataset's heading: what its numbers do and do not show.
@@ -73,7 +78,7 @@ def dataset_section(name: str, fingerprint: str, df: pd.DataFrame, scene: str = 
         accuracy_metrics = [m for m in tables.PRIMARY_METRICS + ("hdr_mae",) if m in set(summary.metric)]
         accuracy_metrics += sorted(set(summary.metric) - set(accuracy_metrics) - set(tables.COST_METRICS))
         costs = [c for c in tables.COST_METRICS if c in set(summary.metric)]
-        lookup = {(r.representation, r.metric): r for r in summary.itertuples()}
+        lookup = {(r.representation, r.metric): r for r in summary.itertuples() if r.spp == 0}
         header = ["rank", "representation"]
         header += [f"{m} {_arrow(lookup_any(summary, m).higher_is_better)}" for m in accuracy_metrics]
         header += [COST_LABELS[c] for c in costs] + ["materials"]
@@ -81,7 +86,7 @@ def dataset_section(name: str, fingerprint: str, df: pd.DataFrame, scene: str = 
         for rank, rep in enumerate(ranked["representation"], 1):
             cells = [str(rank), f"`{rep}`"]
             cells += [fmt(lookup[(rep, m)].mean) if (rep, m) in lookup else "–" for m in accuracy_metrics]
-            cells += [fmt(getattr(lookup[(rep, c)], tables.COST_METRICS[c])) if (rep, c) in lookup else "–" for c in costs]
+            cells += [_cost(lookup.get((rep, c)), c) for c in costs]
             cells.append(f"{lookup[(rep, primary)].n}/{n_materials}")
             rows.append(cells)
         lines += [
@@ -95,6 +100,9 @@ def dataset_section(name: str, fingerprint: str, df: pd.DataFrame, scene: str = 
             "",
             *_table(header, rows),
             "",
+            *([f"{CONTENDED} measured while other brdfbench jobs ran on the same host: timings are not comparable "
+               "with unmarked ones.", ""] if any(_contended(lookup.get((rep, c)), c) for rep in ranked["representation"]
+                                                  for c in costs) else []),
             "### Per metric",
             "",
         ]
@@ -111,10 +119,19 @@ def dataset_section(name: str, fingerprint: str, df: pd.DataFrame, scene: str = 
     return lines + _failures(df)
 
 
-def convergence_section(name: str, fingerprint: str, df: pd.DataFrame, scene: str,
+def _contended(row, metric: str) -> bool:
+    return row is not None and metric in tables.TIMED and bool(row.contended)
+
+
+def _cost(row, metric: str) -> str:
+    if row is None:
+        return "–"
+    return fmt(getattr(row, tables.COST_METRICS[metric])) + (CONTENDED if _contended(row, metric) else "")
+
+
+def convergence_section(name: str, fingerprint: str, df: pd.DataFrame, base: str, sampler: str,
                         plots: Collection[str] = ()) -> list[str]:
-    """Mean RMSE per spp rung per representation for one (dataset, scene/convergence/sampler)."""
-    base, sampler = tables.split_convergence(scene)
+    """Mean RMSE per spp rung per representation for one (dataset, scene, sampler)."""
     lines = [f"## Dataset `{name}`, convergence on `{base}`, sampler `{sampler}`", "",
              f"{df['material'].nunique()} materials, fingerprint `{fingerprint}`.", "",
              "> Monte Carlo noise only: each representation's render at n spp against its own high-spp render "
@@ -128,19 +145,19 @@ def convergence_section(name: str, fingerprint: str, df: pd.DataFrame, scene: st
         lines += ["No successful results yet.", ""]
     else:
         summary = tables.summarize(df)
-        lookup = {(r.representation, r.metric): r for r in summary.itertuples()}
+        lookup = {(r.representation, r.metric, r.spp): r for r in summary.itertuples()}
         ladder = sorted(set(rmse.spp))
         top = ladder[-1]
         means = {(r.representation, r.spp): r for r in rmse.itertuples()}
-        order = sorted(set(rmse.representation), key=lambda rep: getattr(lookup.get((rep, "convergence_rmse_1spp")),
-                                                                      "mean", math.inf))
+        order = sorted(set(rmse.representation),
+                       key=lambda rep: getattr(lookup.get((rep, "convergence_rmse_1spp", 0)), "mean", math.inf))
         header = ["representation", *[f"{n} spp" for n in ladder], "slope", "RMSE at 1 spp (fit) ↓",
                   f"render time at {top} spp (s) ↓", "materials"]
         rows = []
         for rep in order:
             cells = [f"`{rep}`", *[fmt(means[(rep, n)].mean) if (rep, n) in means else "–" for n in ladder]]
-            for metric in ("convergence_slope", "convergence_rmse_1spp", f"render_time@spp={top}"):
-                cells.append(fmt(lookup[(rep, metric)].mean) if (rep, metric) in lookup else "–")
+            for metric, spp in (("convergence_slope", 0), ("convergence_rmse_1spp", 0), ("render_time", top)):
+                cells.append(fmt(lookup[(rep, metric, spp)].mean) if (rep, metric, spp) in lookup else "–")
             cells.append(str(max(r.n for (name, _), r in means.items() if name == rep)))
             rows.append(cells)
         lines += ["### Error against spp", "", *_table(header, rows), ""]
@@ -178,11 +195,9 @@ def render(df: pd.DataFrame, source: str, plots: Collection[str] = ()) -> str:
     versions = ", ".join(sorted(set(df.package_version)))
     shas = ", ".join(sorted({s[:10] for s in df.git_sha}))
     lines += [f"brdfbench {versions}; git {shas}. Timings are from the machine that ran each cell.", ""]
-    if "scene" not in df.columns:
-        df = df.assign(scene="brdf_space")
-    for (name, fingerprint, scene), group in df.groupby(["dataset", "dataset_fingerprint", "scene"], sort=True):
-        if tables.is_convergence(scene):
-            lines += convergence_section(name, fingerprint, group, scene, plots)
+    for (name, fingerprint, scene, harness, sampler), group in tables.sections(df):
+        if harness == "convergence":
+            lines += convergence_section(name, fingerprint, group, scene, sampler, plots)
         else:
             lines += dataset_section(name, fingerprint, group, scene)
     return "\n".join(lines)

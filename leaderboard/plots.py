@@ -24,7 +24,8 @@ def convergence_figures(df: pd.DataFrame) -> dict:
     """{file name: matplotlib Figure}: per (dataset, base scene), mean RMSE of HDR radiance
     against spp (left) and against mean render time (right), log-log, one curve per
     (representation, sampler), with a −½ slope guide."""
-    conv = df[df["scene"].map(tables.is_convergence)] if "scene" in df.columns else df.iloc[0:0]
+    df = tables.normalise(df)
+    conv = df[df["harness"] == "convergence"]
     if conv.empty:
         return {}
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -32,8 +33,7 @@ def convergence_figures(df: pd.DataFrame) -> dict:
     from matplotlib.ticker import NullFormatter
 
     out = {}
-    by_scene = conv.assign(base_scene=conv["scene"].map(lambda s: tables.split_convergence(s)[0]))
-    for (dataset, fingerprint, base), group in by_scene.groupby(["dataset", "dataset_fingerprint", "base_scene"]):
+    for (dataset, fingerprint, base), group in conv.groupby(["dataset", "dataset_fingerprint", "scene"]):
         curves = _curves(group)
         if not curves:
             continue
@@ -59,9 +59,8 @@ def convergence_figures(df: pd.DataFrame) -> dict:
 def _curves(group: pd.DataFrame) -> dict[str, dict]:
     """{"representation / sampler": {spp, rmse, time}} of one base scene's convergence rows."""
     curves = {}
-    for scene, rows in group.groupby("scene", sort=True):
-        sampler = tables.split_convergence(scene)[1]
-        rungs = tables.convergence_rungs(rows)
+    for sampler, rows in group.groupby("sampler", sort=True):
+        rungs = tables.convergence_rungs(tables.with_labels(rows))
         for rep, r in rungs.groupby("representation", sort=True):
             err = r[r.base == "rmse_hdr"].set_index("spp")["mean"]
             if err.empty:

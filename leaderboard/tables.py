@@ -1,6 +1,14 @@
-"""Aggregate store rows into per-representation summaries, one per dataset."""
+"""Aggregate store rows into per-configuration summaries, one per report section.
+
+A configuration (its config hash) is one row of a table, never merged with another. Its
+label is the configuration's label; where two configurations in a section share a label,
+each gets the parameters in which they differ: `nbrdf (hidden=[8, 8])`.
+"""
 
 from __future__ import annotations
+
+import json
+from typing import Any
 
 import pandas as pd
 
@@ -22,22 +30,109 @@ COST_METRICS = {
     "flops_per_eval": "median",
     "render_time": "mean",
     "render_samples_per_s": "median",
+    "peak_rss_fit": "max",
+    "peak_rss_eval": "max",
+    "peak_rss_train": "max",
 }
+#: Cost figures that depend on the machine's load (timings), flagged when measured under contention.
+TIMED = ("fit_time", "train_time", "evals_per_s", "render_time", "render_samples_per_s")
+
+_DEFAULTS = {"config_hash": None, "params": "null", "spp": 0, "sampler": "", "scene": "brdf_space", "harness": None,
+             "concurrent_jobs": 1, "scope": "material"}
+
+
+def normalise(df: pd.DataFrame) -> pd.DataFrame:
+    """The frame with every column the report reads (older or hand-made frames lack some)."""
+    df = df.copy()
+    for col, default in _DEFAULTS.items():
+        if col not in df.columns:
+            df[col] = default
+    df["config_hash"] = df["config_hash"].where(df["config_hash"].notna(), df["representation"])
+    missing = df["harness"].isna() | (df["harness"] == "")
+    inferred = df["sampler"].map(lambda s: "convergence" if s else None)
+    inferred = inferred.where(inferred.notna(), df["scene"].map(lambda s: "accuracy" if s == "brdf_space" else "render"))
+    df["harness"] = df["harness"].where(~missing, inferred)
+    df["spp"] = pd.to_numeric(df["spp"]).fillna(0).astype(int)
+    return df
+
+
+def _params(text: Any) -> dict[str, Any] | None:
+    try:
+        value = json.loads(text) if isinstance(text, str) else None
+    except ValueError:
+        return None
+    return value if isinstance(value, dict) and "migrated_from" not in value else None
+
+
+def _flatten(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict) and v:
+            out.update(_flatten(v, f"{key}."))
+        else:
+            out[key] = v
+    return out
+
+
+def _show(value: Any) -> str:
+    return json.dumps(value, default=str).replace('"', "") if isinstance(value, (list, dict)) else str(value)
+
+
+def display_labels(df: pd.DataFrame) -> dict[str, str]:
+    """config hash → the label shown for it: unique within `df`."""
+    configs = df.drop_duplicates("config_hash")[["config_hash", "representation", "params"]]
+    out: dict[str, str] = {}
+    for label, group in configs.groupby("representation", sort=False):
+        if len(group) == 1:
+            out[group.config_hash.iloc[0]] = label
+            continue
+        flat = {h: _flatten(p) if (p := _params(text)) is not None else None
+                for h, text in zip(group.config_hash, group.params)}
+        known = [f for f in flat.values() if f is not None]
+        keys = sorted({k for f in known for k in f})
+        differing = [k for k in keys if len({_show(f.get(k, "–")) for f in known}) > 1]
+        for h, f in flat.items():
+            if f is None:
+                out[h] = f"{label} [{h[:8]}]"
+                continue
+            shown = [k for k in differing if not k.startswith("harness.")] or differing
+            parts = ", ".join(f"{k.removeprefix('params.')}={_show(f.get(k, '–'))}" for k in shown)
+            out[h] = f"{label} ({parts})" if parts else f"{label} [{h[:8]}]"
+    # two configurations can still collide (identical shown parameters): keep them apart by hash
+    seen: dict[str, int] = {}
+    for h, name in out.items():
+        seen[name] = seen.get(name, 0) + 1
+    return {h: (f"{name} [{h[:8]}]" if seen[name] > 1 else name) for h, name in out.items()}
+
+
+def with_labels(df: pd.DataFrame) -> pd.DataFrame:
+    """`representation` replaced by each configuration's unique display label."""
+    labels = display_labels(df)
+    return df.assign(representation=df["config_hash"].map(labels))
 
 
 def summarize(df: pd.DataFrame) -> pd.DataFrame:
-    """One row per (representation, metric): mean/median/worst over materials, with unit and direction."""
+    """One row per (configuration label, metric, spp): mean/median/max/worst over materials,
+    with unit, direction and whether any of its cells ran beside other jobs."""
+    cols = ["representation", "metric", "spp", "mean", "median", "max", "worst", "n", "unit", "higher_is_better",
+            "contended"]
     ok = df[df.status == "ok"]
     if ok.empty:
-        return pd.DataFrame(columns=["representation", "metric", "mean", "median", "worst", "n", "unit", "higher_is_better"])
-    # Latest value per cell and metric (a re-run with a new config hash adds rows).
-    ok = ok.sort_values("timestamp").drop_duplicates(["representation", "material", "metric"], keep="last")
-    groups = ok.groupby(["representation", "metric"])
+        return pd.DataFrame(columns=cols)
+    if "spp" not in ok.columns:
+        ok = ok.assign(spp=0)
+    if "concurrent_jobs" not in ok.columns:
+        ok = ok.assign(concurrent_jobs=1)
+    keys = ["representation", "metric", "spp"]
+    groups = ok.groupby(keys)
     out = groups["value"].agg(["mean", "median", "min", "max", "count"]).reset_index()
     meta = groups[["unit", "higher_is_better"]].first().reset_index()
-    out = out.merge(meta, on=["representation", "metric"])
+    contended = groups["concurrent_jobs"].max().reset_index(name="contended")
+    out = out.merge(meta, on=keys).merge(contended, on=keys)
+    out["contended"] = out["contended"] > 1
     out["worst"] = out["min"].where(out["higher_is_better"], out["max"])
-    return out.rename(columns={"count": "n"}).drop(columns=["min", "max"])
+    return out.rename(columns={"count": "n"}).drop(columns=["min"])[cols]
 
 
 def failures(df: pd.DataFrame) -> pd.DataFrame:
@@ -48,39 +143,36 @@ def failures(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def primary_metric(summary: pd.DataFrame) -> str | None:
-    present = set(summary["metric"])
-    return next((m for m in PRIMARY_METRICS if m in present), None)
+    """The first of PRIMARY_METRICS present, else the first other non-cost metric (a plugin's own)."""
+    present = set(summary.loc[summary["spp"] == 0, "metric"]) if "spp" in summary else set(summary["metric"])
+    known = next((m for m in PRIMARY_METRICS if m in present), None)
+    return known or next(iter(sorted(present - set(COST_METRICS))), None)
 
 
 def ranking(summary: pd.DataFrame, metric: str) -> pd.DataFrame:
-    rows = summary[summary.metric == metric]
+    rows = summary[(summary.metric == metric) & (summary.spp == 0)]
     if rows.empty:
         return rows
     ascending = not bool(rows["higher_is_better"].iloc[0])
     return rows.sort_values("mean", ascending=ascending).reset_index(drop=True)
 
 
+def sections(df: pd.DataFrame) -> list[tuple[tuple[str, str, str, str, str], pd.DataFrame]]:
+    """((dataset, fingerprint, scene, harness, sampler), rows) of each report section; the
+    sampler splits convergence sections only (a render section lists its configurations)."""
+    df = normalise(df)
+    df = df.assign(_section_sampler=df["sampler"].where(df["harness"] == "convergence", ""))
+    out = []
+    for key, group in df.groupby(["dataset", "dataset_fingerprint", "scene", "harness", "_section_sampler"], sort=True):
+        out.append((key, with_labels(group.drop(columns="_section_sampler"))))
+    return out
+
+
 # --------------------------------------------------------------------------- convergence
-
-#: The store's scene column of convergence rows: "<scene>/convergence/<sampler>".
-CONVERGENCE_INFIX = "/convergence/"
-#: Per-rung metric names: "<metric>@spp=<n>".
-_RUNG = r"^(?P<base>.+)@spp=(?P<spp>\d+)$"
-
-
-def is_convergence(scene: str) -> bool:
-    return CONVERGENCE_INFIX in scene
-
-
-def split_convergence(scene: str) -> tuple[str, str]:
-    """(scene, sampler label) of a convergence scene label."""
-    base, _, sampler = scene.partition(CONVERGENCE_INFIX)
-    return base, sampler
 
 
 def convergence_rungs(df: pd.DataFrame) -> pd.DataFrame:
     """Per-rung means over materials: representation, base (metric), spp, mean, n, unit."""
     summary = summarize(df)
-    parts = summary["metric"].str.extract(_RUNG)
-    rungs = summary.assign(base=parts["base"], spp=pd.to_numeric(parts["spp"])).dropna(subset=["base"])
-    return rungs.astype({"spp": int}).sort_values(["representation", "base", "spp"]).reset_index(drop=True)
+    rungs = summary[summary.spp > 0].rename(columns={"metric": "base"})
+    return rungs.sort_values(["representation", "base", "spp"]).reset_index(drop=True)

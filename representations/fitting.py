@@ -33,7 +33,7 @@ import math
 import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import torch
@@ -41,13 +41,10 @@ from scipy.optimize import minimize
 
 from brdfbench import merl
 from brdfbench.errors import DataError
-from brdfbench.protocol import Material
+from brdfbench.protocol import Material, Representation
 
-from .analytic import Geometry, geometry
+from .analytic_terms import Geometry, geometry
 from .lambert import weighted_median
-
-if TYPE_CHECKING:
-    from .analytic import AnalyticBRDF
 
 #: Surrogate smoothing of |r| (r in log(1 + 1/sr) units).
 EPSILON = 1e-3
@@ -247,12 +244,14 @@ def _intra_op_threads(n: int):
             torch.set_num_threads(before)
 
 
-def fit_analytic(model: "AnalyticBRDF", target: Material, *, seed: int = 0) -> FitResult:
+def fit_analytic(model: Representation, target: Material, *, seed: int = 0) -> FitResult:
+    """Fit an analytic model (an `analytic.AnalyticBRDF`: its class gives NAME, COEFFS,
+    `lobe`, `init_shape` and `combine`) to `target`."""
     with _intra_op_threads(1):
         return _fit(model, target, seed)
 
 
-def _fit(model: "AnalyticBRDF", target: Material, seed: int) -> FitResult:
+def _fit(model: Representation, target: Material, seed: int) -> FitResult:
     cls = type(model)
     data = prepare(target, model.n_samples, seed, cls.NAME)
     space = _Space(cls.COEFFS)

@@ -52,3 +52,12 @@ class Lambert(Representation):
     def flops_per_eval(self) -> int:
         return 3
 
+    def drjit_kernel(self):
+        """ρ/π in drjit operations, for this exact class only (a subclass may change
+        `_eval`); drjit is imported here, not with the representation."""
+        if type(self) is not Lambert:
+            return None
+        from .drjit_kernels import LambertKernel
+
+        return LambertKernel(self)
+

@@ -105,3 +105,12 @@ class TabulatedMERL(Representation):
         if "samples" in tensors:
             model.samples = tensors["samples"].double().numpy()
         return model
+
+    def drjit_kernel(self):
+        """The table lookup in drjit operations, for this exact class only (a subclass may change
+        `_eval`); drjit is imported here, not with the representation."""
+        if type(self) is not TabulatedMERL:
+            return None
+        from .drjit_kernels import merl_kernel
+
+        return merl_kernel(self)

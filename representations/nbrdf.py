@@ -1,7 +1,7 @@
 """Neural BRDFs: NBRDF (Sztrajman et al. 2021) and the naive direction-input MLP.
 
 `nbrdf` is an MLP 6 → 21 → 21 → 3 (hidden sizes configurable) on the Rusinkiewicz
-encoding (see mlp.py); `naive_mlp` is the same budget fed (ωi, ωo) directly, the
+encoding (see brdfbench.nbrdf.network); `naive_mlp` is the same budget fed (ωi, ωo) directly, the
 baseline of Timonen et al. Both fit many materials at once (`fit_many`, see
 nbrdf_fit.py); the runner hands them `batch_materials` materials per call.
 
@@ -10,7 +10,12 @@ seed and the material name, so a material's fit does not depend on its batch-mat
 "shared" fits the first material this model sees from random weights and starts every
 later material from that network, which keeps the weight vectors of different materials
 aligned for generators that learn over them; a path starts every material from the
-network in that file (any format `nbrdf_formats.read_network` reads).
+network in that file (any format `brdfbench.nbrdf.formats.read_network` reads).
+
+The network itself (layout, encodings, forward pass) is the core's `brdfbench.nbrdf`,
+which the `nbrdf_release` dataset uses too; a fitted model exposes it as `network`.
+A model made from a converted network (`from_network`) records only what is true of it:
+its architecture and units as params, its encoding and source file as metadata.
 """
 
 from __future__ import annotations
@@ -21,19 +26,48 @@ from typing import Any, ClassVar, Sequence
 
 import torch
 
-from brdfbench import merl
 from brdfbench.errors import ConfigError, ModelFileError
+from brdfbench.nbrdf import network as net
+from brdfbench.nbrdf.formats import read_network
+from brdfbench.nbrdf.network import Network
 from brdfbench.protocol import FIT_LOSS_KEY, Material, Representation
 
-from . import mlp
 from .nbrdf_fit import Recipe, fit_batched
 
-DEFAULT_HIDDEN = (21, 21)
+DEFAULT_HIDDEN = net.PUBLISHED_HIDDEN
 DEFAULT_BATCH_MATERIALS = 16
 
 
 def material_seed(seed: int, name: str) -> int:
     return (seed * 1_000_003 + zlib.crc32(name.encode("utf-8"))) % 2**63
+
+
+def _checked_weights(tensors, hidden, where: str) -> dict[str, torch.Tensor]:
+    """The float32 weights of a 6 → hidden… → 3 network from `tensors`, or a ModelFileError
+    naming `where` and the tensor that is missing, misshapen, not floating point or not finite."""
+    out = {}
+    for key, shape in net.weight_shapes(hidden).items():
+        if key not in tensors:
+            raise ModelFileError(f"{where} lacks tensor {key!r}")
+        t = torch.as_tensor(tensors[key]).detach()
+        if tuple(t.shape) != shape:
+            raise ModelFileError(f"{where} tensor {key!r} has shape {tuple(t.shape)}, expected {shape}")
+        if not t.dtype.is_floating_point:
+            raise ModelFileError(f"{where} tensor {key!r} has dtype {t.dtype}, expected floating point")
+        if not torch.isfinite(t).all():
+            raise ModelFileError(f"{where} tensor {key!r} holds NaN or Inf")
+        out[key] = t.to(torch.float32).clone()
+    return out
+
+
+def _check_scale(model: str, scale: torch.Tensor, raw_units: bool) -> None:
+    """A saved `output_scale` must be the constant of the model's units."""
+    want = net.units_scale(raw_units)
+    if not scale.dtype.is_floating_point or not torch.isfinite(scale).all():
+        raise ModelFileError(f"{model} model tensor 'output_scale' holds NaN or Inf: {scale.tolist()}")
+    if tuple(scale.shape) != (3,) or not torch.allclose(scale.to(torch.float32), want, rtol=1e-6, atol=0.0):
+        raise ModelFileError(f"{model} model tensor 'output_scale' is {scale.tolist()}; raw_units={raw_units} "
+                             f"means {want.tolist()}")
 
 
 class NeuralBRDF(Representation):
@@ -74,28 +108,52 @@ class NeuralBRDF(Representation):
             init=init, raw_units=bool(raw_units),
         )
         self.hidden = hidden
+        self.raw_units = bool(raw_units)
+        self.batch_materials = batch_materials
+        self.init = init
+        self._fit_params = dict(self.params)  # what a model fitted by this one was made with
         self.recipe = Recipe(epochs=epochs, batch_size=batch_size, lr=lr, schedule=schedule, n_samples=n_samples,
                              output=output, patience=patience, min_improvement=min_improvement)
-        self.output_scale = torch.tensor(merl.CHANNEL_SCALES if raw_units else (1.0, 1.0, 1.0), dtype=torch.float32)
+        self.output_scale = net.units_scale(self.raw_units)
         self.weights: dict[str, torch.Tensor] | None = None
         self.fit_info: dict[str, Any] = {}
         self._anchor: dict[str, torch.Tensor] | None = None  # the start of every fit, once known
 
-    def _read_init(self, path: Path) -> dict[str, torch.Tensor]:
-        from .nbrdf_formats import read_network
+    @property
+    def network(self) -> Network | None:
+        """The fitted weights as the shared NBRDF network (None before a fit)."""
+        if self.weights is None:
+            return None
+        return Network(weights=self.weights, features=self.features, raw_units=self.raw_units)
 
-        network = read_network(path, hidden=self.hidden, features=self.features, raw_units=self.params["raw_units"])
-        if mlp.hidden_of(network.weights) != self.hidden:
-            raise ConfigError(f"{self.plugin_name}: init network {path} has hidden sizes {mlp.hidden_of(network.weights)}, "
+    def _read_init(self, path: Path) -> dict[str, torch.Tensor]:
+        network = read_network(path, hidden=self.hidden, features=self.features, raw_units=self.raw_units)
+        if network.hidden != self.hidden:
+            raise ConfigError(f"{self.plugin_name}: init network {path} has hidden sizes {network.hidden}, "
                               f"this model {self.hidden}")
         if network.features != self.features:
             raise ModelFileError(f"{path}: a {network.features!r}-input network cannot start a {self.features!r}-input model")
         return network.weights
 
+    # -- converted networks ---------------------------------------------------------
+    @classmethod
+    def from_network(cls, network: Network) -> "NeuralBRDF":
+        """A model holding a network's weights as they are (no fit): its params are the
+        architecture and units only, its metadata the encoding and the source file."""
+        where = network.source or "network"
+        if network.features != cls.features:
+            raise ModelFileError(f"{where}: a {network.features!r}-input network is not a {cls.plugin_name} "
+                                 f"({cls.features!r} inputs)")
+        model = cls(hidden=network.hidden, raw_units=network.raw_units)
+        model.params = {"hidden": model.hidden, "raw_units": model.raw_units}
+        model.weights = _checked_weights(network.weights, model.hidden, f"{where}: {cls.plugin_name} network")
+        model.fit_info = {"source": network.source} if network.source else {}
+        return model
+
     # -- fitting -----------------------------------------------------------------
     @property
     def fit_batch_size(self) -> int:
-        return self.params["batch_materials"]
+        return self.batch_materials
 
     def fit(self, target: Material, *, seed: int = 0) -> "NeuralBRDF":
         fitted = self.fit_many([target], seed=seed)[0]
@@ -105,11 +163,11 @@ class NeuralBRDF(Representation):
     def fit_many(self, targets: Sequence[Material], *, seed: int = 0, progress: bool | str = False) -> list["NeuralBRDF"]:
         """One fitted model per target, all trained together in batched passes."""
         targets = list(targets)
-        if self._anchor is None and self.params["init"] not in ("random", "shared"):
-            self._anchor = self._read_init(Path(self.params["init"]))
+        if self._anchor is None and self.init not in ("random", "shared"):
+            self._anchor = self._read_init(Path(self.init))
         models: list[NeuralBRDF | None] = [None] * len(targets)
         pending = list(range(len(targets)))
-        if self.params["init"] == "shared" and self._anchor is None and targets:
+        if self.init == "shared" and self._anchor is None and targets:
             first = self._fit_group([targets[0]], [self._random_init(targets[0], seed)], seed, progress)[0]
             self._anchor = first.weights
             models[0] = first
@@ -122,7 +180,7 @@ class NeuralBRDF(Representation):
         return models
 
     def _random_init(self, target: Material, seed: int) -> dict[str, torch.Tensor]:
-        return mlp.glorot_init(self.hidden, torch.Generator().manual_seed(material_seed(seed, target.name)))
+        return net.glorot_init(self.hidden, torch.Generator().manual_seed(material_seed(seed, target.name)))
 
     def _fit_group(self, group, inits, seed, progress) -> list["NeuralBRDF"]:
         outcomes = fit_batched(
@@ -131,7 +189,7 @@ class NeuralBRDF(Representation):
         )
         fitted = []
         for target, outcome in zip(group, outcomes):
-            model = type(self)(**self.params)
+            model = type(self)(**self._fit_params)
             model._anchor = self._anchor
             model.weights = outcome.weights
             model.fit_info = {FIT_LOSS_KEY: outcome.loss, "epochs": outcome.epochs, "fitted_to": target.name}
@@ -142,8 +200,16 @@ class NeuralBRDF(Representation):
     def _eval(self, wi, wo):
         if self.weights is None:
             raise RuntimeError(f"{self.plugin_name}: evaluate after fit() or load")
-        z = mlp.last_layer(self.weights, mlp.encode(wi, wo, self.features))
-        return mlp.to_value(z, self.output_scale)
+        return net.forward(self.weights, net.encode(wi, wo, self.features), self.output_scale)
+
+    def drjit_kernel(self):
+        """The network in drjit operations (brdfbench.render), for this exact class only:
+        a subclass may change `_eval`."""
+        if type(self) not in (NBRDF, NaiveMLP) or self.weights is None:
+            return None
+        from .drjit_kernels import MLPKernel
+
+        return MLPKernel(self.network, self.plugin_name)
 
     # -- persistence and cost -----------------------------------------------------------
     def state_dict(self):
@@ -157,29 +223,22 @@ class NeuralBRDF(Representation):
     @classmethod
     def from_state(cls, params, tensors, metadata):
         model = cls(**params)
-        expected = mlp.weight_shapes(model.hidden)
+        model.params = {k: model.params[k] for k in params}  # what the file records, no more
         if tensors:
-            for key, shape in expected.items():
-                if key not in tensors:
-                    raise ModelFileError(f"{cls.plugin_name} model lacks tensor {key!r}")
-                if tuple(tensors[key].shape) != shape:
-                    raise ModelFileError(f"{cls.plugin_name} model tensor {key!r} has shape {tuple(tensors[key].shape)}, expected {shape}")
-                if not torch.isfinite(tensors[key]).all():
-                    raise ModelFileError(f"{cls.plugin_name} model tensor {key!r} holds NaN or Inf")
-            model.weights = {k: tensors[k].to(torch.float32) for k in expected}
+            model.weights = _checked_weights(tensors, model.hidden, f"{cls.plugin_name} model")
             if "output_scale" in tensors:
-                model.output_scale = tensors["output_scale"].to(torch.float32)
+                _check_scale(cls.plugin_name, tensors["output_scale"], model.raw_units)
         model.fit_info = {k: v for k, v in metadata.items() if k != "features"}
         return model
 
     @property
     def nbytes(self) -> int:
-        return 4 * mlp.n_weights(self.hidden)  # float32 weights; the 3 channel scales are a constant of the units
+        return 4 * net.n_weights(self.hidden)  # float32 weights; the 3 channel scales are a constant of the units
 
     @property
     def flops_per_eval(self) -> int:
-        encoding = mlp.RUSINKIEWICZ_FLOPS if self.features == "rusinkiewicz" else 0
-        return encoding + mlp.mlp_flops(self.hidden)
+        encoding = net.RUSINKIEWICZ_FLOPS if self.features == "rusinkiewicz" else 0
+        return encoding + net.mlp_flops(self.hidden)
 
 
 class NBRDF(NeuralBRDF):

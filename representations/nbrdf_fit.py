@@ -34,8 +34,7 @@ from tqdm.auto import tqdm
 
 from brdfbench import coords, merl
 from brdfbench.errors import ConfigError
-
-from . import mlp
+from brdfbench.nbrdf import network as net
 
 SCHEDULES = ("onecycle", "constant")
 OUTPUTS = ("log", "clamped")
@@ -106,9 +105,9 @@ def draw_samples(n: int, features: str, seed: int) -> Samples:
     wi, wo = wi[keep], wo[keep]
     theta_h, theta_d, phi_d = theta_h[keep], theta_d[keep], phi_d[keep]
     if features == "rusinkiewicz":
-        x = mlp.encode_angles(theta_h, theta_d, phi_d)
+        x = net.rusinkiewicz_from_angles(theta_h, theta_d, phi_d)
     else:
-        x = mlp.encode(wi, wo, features)
+        x = net.encode(wi, wo, features)
     cells = (merl.theta_half_index(theta_h) * merl.RES_THETA_D + merl.theta_diff_index(theta_d)) * merl.RES_PHI_D
     cells = cells + merl.phi_diff_index(phi_d)
     return Samples(x=x.to(torch.float32), cos_i=wi[:, 2].to(torch.float32), cells=cells)
@@ -130,7 +129,7 @@ def predict_log(z: torch.Tensor, log_c: torch.Tensor, log_1mc: torch.Tensor, out
     """
     if output == "log":
         return torch.logaddexp(z + log_c, log_1mc.expand_as(z))
-    f = torch.relu(torch.expm1(torch.clamp(z, max=mlp.MAX_LOG_VALUE)))
+    f = torch.relu(torch.expm1(torch.clamp(z, max=net.MAX_LOG_VALUE)))
     return torch.log1p(f * torch.exp(log_c))
 
 
@@ -230,9 +229,9 @@ def fit_batched(
         raise ValueError(f"fit_batched needs one initial weight dict per table, got {len(inits)} for {len(tables)}")
     scale = torch.ones(3) if output_scale is None else output_scale.to(torch.float32)
     names = list(inits[0])
-    hidden = mlp.hidden_of(inits[0])
+    hidden = net.hidden_of(inits[0])
     for w in inits:
-        if list(w) != names or mlp.hidden_of(w) != hidden:
+        if list(w) != names or net.hidden_of(w) != hidden:
             raise ValueError("every initial weight dict must have the same layout")
     if samples is None:
         samples = draw_samples(recipe.n_samples, features, sample_seed)

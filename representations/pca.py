@@ -225,3 +225,12 @@ class PCA(Representation):
     @property
     def flops_per_eval(self) -> int:
         return NEAREST_FLOPS  # a nearest-cell lookup of the table reconstructed at fit time
+
+    def drjit_kernel(self):
+        """The reconstructed table's lookup in drjit operations, for this exact class only (a subclass may change
+        `_eval`); drjit is imported here, not with the representation."""
+        if type(self) is not PCA:
+            return None
+        from .drjit_kernels import pca_kernel
+
+        return pca_kernel(self)

@@ -43,10 +43,12 @@ NBRDF = RepresentationSpec(
     description="Neural BRDF (Sztrajman et al. 2021): MLP 6-21-21-3 on Rusinkiewicz h, d; exp-1 output; batched L1-log-cos fit",
     target="brdfbench_representations.nbrdf:NBRDF",
     tags=frozenset({"isotropic", "fittable", "neural"}),
+    check_params={"epochs": 2, "n_samples": 100_000},  # the kit's quick run: a short fit
 )
 NAIVE_MLP = RepresentationSpec(
     name="naive_mlp",
     description="The same MLP budget fed (wi, wo) directly: the naive neural baseline of the triplane paper (seed 002)",
     target="brdfbench_representations.nbrdf:NaiveMLP",
     tags=frozenset({"fittable", "neural"}),
+    check_params={"epochs": 2, "n_samples": 100_000},  # the kit's quick run: a short fit
 )

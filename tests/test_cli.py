@@ -35,7 +35,7 @@ def test_explicit_multirun_sweep(tmp_path):
     out = brdfbench("-m", "representation=lambert,merl_trilinear", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     board = (tmp_path / "res" / "leaderboard.md").read_text()
-    assert "`merl-trilinear`" in board and "`lambert`" in board and "`merl`" not in board
+    assert "`merl_trilinear`" in board and "`lambert`" in board and "`merl`" not in board
 
 
 def test_render_sweep_with_the_multirun_flag_among_the_overrides(tmp_path):
@@ -137,3 +137,44 @@ def test_inspect_shows_params_and_fit_metadata(tmp_path):
     assert out.returncode == 0, out.stderr
     assert "representation 'ggx'" in out.stdout and "FLOP/eval" in out.stdout
     assert f"fit_loss: {model.fit_loss}" in out.stdout
+
+
+def test_version_prints_the_brdfbench_version(tmp_path):
+    from brdfbench import __version__
+
+    out = brdfbench("--version", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == f"brdfbench {__version__}"
+
+
+def test_help_lists_subcommands_config_groups_and_their_options(tmp_path):
+    from importlib import resources
+
+    out = brdfbench("--help", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    for command in ("list", "report", "check", "inspect", "convert"):
+        assert f"\n    {command} " in out.stdout, command
+    conf = resources.files("brdfbench_conf")
+    for group in ("representation", "dataset", "harness", "scene"):
+        assert f"{group}=OPTION" in out.stdout
+        for option in (r.name[:-5] for r in (conf / group).iterdir() if r.name.endswith(".yaml")):
+            assert f"\n    {option} " in out.stdout, (group, option)
+    assert "brdfbench representation=lambert" in out.stdout and "--hydra-help" in out.stdout
+    assert not (tmp_path / "results").exists()
+
+
+def test_hydra_help_stays_reachable(tmp_path):
+    out = brdfbench("--hydra-help", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "Hydra" in out.stdout and "--multirun" in out.stdout
+
+
+def test_list_into_a_closed_pipe_ends_without_a_traceback(tmp_path):
+    """`brdfbench list | head -n 2`: the reader leaves early; here it leaves before the first line."""
+    proc = subprocess.Popen([sys.executable, "-m", "brdfbench.cli", "list"], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()
+    stderr = proc.stderr.read()
+    proc.stderr.close()
+    assert proc.wait(timeout=600) == 141  # as a tool killed by SIGPIPE
+    assert "Traceback" not in stderr and "BrokenPipeError" not in stderr, stderr

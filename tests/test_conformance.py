@@ -110,3 +110,34 @@ def test_declared_expected_failure_is_reported_as_xfailed():
         assert report.passed
     finally:
         registry.unregister("representations", spec.name)
+
+
+# Quick and full runs: the spec's check_params (a short fit) unless full=True.
+
+
+class RecordsParams(Lambert):
+    tags = Lambert.tags
+    made_with: list = []
+
+    def __init__(self, quick=False):
+        super().__init__()
+        self.params = {"quick": quick}
+        RecordsParams.made_with.append(quick)
+
+
+@pytest.mark.parametrize("full,params,expected", [(False, None, True), (True, None, False), (False, {"quick": "mine"}, "mine")])
+def test_quick_run_uses_check_params_full_run_the_defaults(full, params, expected):
+    spec = _spec(RecordsParams, "records_params", check_params={"quick": True})
+    RecordsParams.made_with.clear()
+    try:
+        report = check_representation(spec, n_pairs=7000, full=full, params=params).raise_on_failure()
+        assert set(RecordsParams.made_with) == {expected}
+        assert report.params == ({"quick": expected} if expected is not False else {})
+    finally:
+        registry.unregister("representations", spec.name)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [n for n in registry.names("representations") if registry.get("representations", n).check_params])
+def test_full_conformance_of_plugins_with_a_quick_run(name):
+    check_representation(name, full=True).raise_on_failure()

@@ -12,10 +12,10 @@ import torch
 
 from brdfbench import mitsuba_env, scenes
 from brdfbench.errors import ConfigError
-from brdfbench.harness.convergence import ConvergenceHarness, derive_seed, fit_slope, scene_label
+from brdfbench.harness.convergence import ConvergenceHarness, derive_seed, fit_slope, sampler_label
 from brdfbench.render.simulate import build_simulator
 from brdfbench.report import write_reports
-from brdfbench.runner import HarnessConfig, RunConfig, run
+from brdfbench.runner import RunConfig, harness_config, run
 from brdfbench.store import ResultsStore
 from brdfbench_leaderboard import markdown
 from brdfbench_representations.analytic import GGX
@@ -43,7 +43,8 @@ def _lambert() -> Lambert:
 
 
 def _values(measurements) -> dict[str, float]:
-    return {m.metric: m.value for m in measurements}
+    """Figures by name, per-rung ones as `metric@spp=n`."""
+    return {(f"{m.metric}@spp={m.spp}" if m.spp else m.metric): m.value for m in measurements}
 
 
 # --------------------------------------------------------------------------- the estimator's rate
@@ -114,9 +115,9 @@ def test_the_path_traced_scene_converges_too(tmp_path):
 # --------------------------------------------------------------------------- the runner and the store
 
 
-def _convergence(**kw) -> HarnessConfig:
+def _convergence(**kw) -> object:
     fields = {"metrics": (), "backend": "torch", "spp_ladder": (1, 2, 4, 8), "reference_spp": 64, **kw}
-    return HarnessConfig(kind="convergence", **fields)
+    return harness_config(kind="convergence", **fields)
 
 
 def _cfg(tmp_path, synthetic_cache, harness, scene="sphere_envmap", scene_params=None, **kw):
@@ -132,13 +133,13 @@ def _cfg(tmp_path, synthetic_cache, harness, scene="sphere_envmap", scene_params
 def test_rungs_land_in_the_store_per_sampler_and_in_the_leaderboard(tmp_path, synthetic_cache):
     assert run(_cfg(tmp_path, synthetic_cache, _convergence()))["done"] == 1
     df = ResultsStore(tmp_path / "brdfbench.sqlite").frame()
-    assert set(df.scene) == {"sphere_envmap/convergence/cosine"}
-    rows = {r.metric: r for r in df.itertuples()}
+    assert set(df.scene) == {"sphere_envmap"} and set(df.sampler) == {"cosine"} and set(df.harness) == {"convergence"}
+    rows = {(r.metric, r.spp): r for r in df.itertuples()}
     for n in (1, 2, 4, 8):
-        assert rows[f"rmse_hdr@spp={n}"].unit == "radiance" and not rows[f"rmse_hdr@spp={n}"].higher_is_better
-        assert rows[f"relmse_hdr@spp={n}"].unit == "1"
-        assert rows[f"render_time@spp={n}"].unit == "s"
-    assert {"convergence_slope", "convergence_rmse_1spp", "fit_time"} <= set(rows)
+        assert rows[("rmse_hdr", n)].unit == "radiance" and not rows[("rmse_hdr", n)].higher_is_better
+        assert rows[("relmse_hdr", n)].unit == "1"
+        assert rows[("render_time", n)].unit == "s"
+    assert {("convergence_slope", 0), ("convergence_rmse_1spp", 0), ("fit_time", 0)} <= set(rows)
     references = list((tmp_path / "renders" / "sphere_envmap" / "convergence").rglob("reference/lambert/*.exr"))
     assert len(references) == 1
     stamp = references[0].stat().st_mtime_ns
@@ -146,10 +147,10 @@ def test_rungs_land_in_the_store_per_sampler_and_in_the_leaderboard(tmp_path, sy
     # another ladder is another cell, but the same model's reference is reused from the cache
     assert run(_cfg(tmp_path, synthetic_cache, _convergence(spp_ladder=(1, 4))))["done"] == 1
     assert references[0].stat().st_mtime_ns == stamp
-    # another sampler is told apart in the scene column
+    # another sampler is told apart in the sampler column
     assert run(_cfg(tmp_path, synthetic_cache, _convergence(sampler="uniform")))["done"] == 1
-    scenes_now = set(ResultsStore(tmp_path / "brdfbench.sqlite").frame().scene)
-    assert scenes_now == {"sphere_envmap/convergence/cosine", "sphere_envmap/convergence/uniform"}
+    samplers_now = set(ResultsStore(tmp_path / "brdfbench.sqlite").frame().sampler)
+    assert samplers_now == {"cosine", "uniform"}
 
     paths = write_reports(tmp_path)
     board = paths[0].read_text()
@@ -161,9 +162,9 @@ def test_rungs_land_in_the_store_per_sampler_and_in_the_leaderboard(tmp_path, sy
     assert "| `lambert` |" in board and "| 1 spp |" in board and "slope" in board
 
 
-def test_sampler_parameters_are_part_of_the_scene_label():
-    assert scene_label("sphere_envmap", "cosine") == "sphere_envmap/convergence/cosine"
-    assert scene_label("sphere_envmap", "ggx", {"alpha": 0.2}) == "sphere_envmap/convergence/ggx(alpha=0.2)"
+def test_sampler_parameters_are_part_of_the_sampler_label():
+    assert sampler_label("cosine") == "cosine"
+    assert sampler_label("ggx", {"alpha": 0.2}) == "ggx(alpha=0.2)"
 
 
 @pytest.mark.parametrize("harness, scene, match", [
@@ -204,13 +205,14 @@ def test_the_packaged_config_composes_with_sampler_parameters():
 def _board_rows() -> pd.DataFrame:
     rows = []
     for rep, sampler, scale in (("ggx", "ggx(alpha=0.2)", 0.3), ("ggx", "cosine", 0.6), ("lambert", "cosine", 0.2)):
-        cell = dict(representation=rep, scene=f"sphere_envmap/convergence/{sampler}", higher_is_better=False)
+        cell = dict(representation=rep, scene="sphere_envmap", sampler=sampler, harness="convergence",
+                    higher_is_better=False)
         for n in (1, 4, 16):
-            rows += [dict(cell, metric=f"rmse_hdr@spp={n}", value=scale / math.sqrt(n), unit="radiance"),
-                     dict(cell, metric=f"render_time@spp={n}", value=0.01 * n, unit="s")]
+            rows += [dict(cell, metric="rmse_hdr", spp=n, value=scale / math.sqrt(n), unit="radiance"),
+                     dict(cell, metric="render_time", spp=n, value=0.01 * n, unit="s")]
         rows.append(dict(cell, metric="convergence_slope", value=-0.5, unit="1"))
-    rows.append(dict(representation="lambert", scene="brdf_space", metric="l1_log_cos", value=0.1, unit="log",
-                     higher_is_better=False))
+    rows.append(dict(representation="lambert", scene="brdf_space", sampler="", harness="accuracy", spp=0,
+                     metric="l1_log_cos", value=0.1, unit="log", higher_is_better=False))
     df = pd.DataFrame(rows)
     df["material"], df["status"], df["message"], df["timestamp"] = "a", "ok", "", 1.0
     df["dataset"], df["dataset_fingerprint"], df["package_version"], df["git_sha"] = "synthetic", "fp", "0.1", "abc"

@@ -229,9 +229,9 @@ def test_harness_configs_name_metrics_of_their_kind():
     """Accuracy harnesses evaluate on BRDF values (no image metric); the render harness on images only."""
     from omegaconf import OmegaConf
 
-    from brdfbench.runner import HarnessConfig
+    from brdfbench.runner import harness_config
 
-    by_kind: dict[str, set[str]] = {"accuracy": set(HarnessConfig.metrics)}
+    by_kind: dict[str, set[str]] = {"accuracy": set(harness_config().metrics)}
     for path in (REPO / "conf" / "harness").glob("*.yaml"):
         cfg = OmegaConf.load(path)
         by_kind.setdefault(cfg.get("kind", "accuracy"), set()).update(cfg.get("metrics", []))

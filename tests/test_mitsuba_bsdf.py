@@ -56,9 +56,9 @@ def mb(mi):
 
 def random_mlp(model, seed: int):
     """An NBRDF-style model with random weights (positive outputs): no fit needed."""
-    from brdfbench_representations import mlp
+    from brdfbench.nbrdf import network as nw
 
-    weights = mlp.glorot_init(model.hidden, torch.Generator().manual_seed(seed))
+    weights = nw.glorot_init(model.hidden, torch.Generator().manual_seed(seed))
     weights[f"b{len(model.hidden) + 1}"] += 1.0
     model.weights = weights
     return model

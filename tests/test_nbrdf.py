@@ -10,20 +10,21 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brdfbench import merl, registry
-from brdfbench.data.nbrdf_h5 import MAX_LOG_VALUE, nbrdf_table
+from brdfbench import merl, modelio
+from brdfbench.data.nbrdf_h5 import nbrdf_table
 from brdfbench.data.nbrdf_release import find_release_dir, nbrdf_release_dataset
 from brdfbench.errors import ConfigError, ModelFileError
+from brdfbench.nbrdf import network as nw
+from brdfbench.nbrdf.formats import Network, read_network, to_model, write_network
+from brdfbench.nbrdf.network import MAX_LOG_VALUE
 from brdfbench.protocol import FIT_LOSS_KEY, Material
-from brdfbench.runner import HarnessConfig, RunConfig, run
+from brdfbench.runner import RunConfig, harness_config, run
 from brdfbench.store import ResultsStore
 from brdfbench.testing import adversarial_pairs
-from brdfbench_representations import mlp
 from brdfbench_representations.nbrdf import NBRDF, NaiveMLP
 from brdfbench_representations.nbrdf_fit import (
     REFERENCE_RECIPE, Recipe, draw_samples, fit_batched, learning_rate, predict_log,
 )
-from brdfbench_representations.nbrdf_formats import Network, write_network
 
 #: A recipe small enough for unit tests (about 0.1 s per material-epoch less than the default).
 TINY = Recipe(epochs=4, batch_size=1024, lr=1e-2, n_samples=30_000, patience=None)
@@ -37,7 +38,7 @@ def _materials(small_dataset, n=3):
 
 
 def _init(seed, hidden=(21, 21)):
-    return mlp.glorot_init(hidden, torch.Generator().manual_seed(seed))
+    return nw.glorot_init(hidden, torch.Generator().manual_seed(seed))
 
 
 def _assert_weights_close(a, b, **tol):
@@ -75,7 +76,7 @@ def test_log_output_has_a_gradient_where_the_clamp_has_none():
 @settings(max_examples=100, deadline=None)
 @given(z=st.floats(-1e30, 1e30))
 def test_evaluation_never_overflows(z):
-    value = mlp.to_value(torch.tensor([[z] * 3], dtype=torch.float32), torch.tensor(merl.CHANNEL_SCALES, dtype=torch.float32))
+    value = nw.to_value(torch.tensor([[z] * 3], dtype=torch.float32), torch.tensor(merl.CHANNEL_SCALES, dtype=torch.float32))
     assert torch.isfinite(value).all() and (value >= 0).all()
     assert float(value[0, 0]) <= math.expm1(MAX_LOG_VALUE) * merl.CHANNEL_SCALES[0] * (1 + 1e-6)
 
@@ -213,7 +214,7 @@ def test_reference_recipe_kills_a_channel_the_default_keeps(release):
     dead = {}
     for name, recipe in (("reference", REFERENCE_RECIPE), ("default", Recipe())):
         outcome = fit_batched([target.table], [init], recipe=recipe, samples=samples)[0]
-        dead[name] = (mlp.last_layer(outcome.weights, samples.x) <= 0).double().mean(dim=0)
+        dead[name] = (nw.last_layer(outcome.weights, samples.x) <= 0).double().mean(dim=0)
     assert dead["reference"].max() == 1.0, dead  # a channel outputs 0 for every sample
     assert dead["default"].max() < 0.01, dead
 
@@ -255,12 +256,76 @@ def test_initialisation_from_a_file(small_dataset, tmp_path):
         NBRDF(**TINY_PARAMS, init=str(tmp_path / "missing.npy")).fit(a)
 
 
+def _with_tensor(path, key, change):
+    """Rewrite one tensor of a saved model file in place, header kept (a damaged file)."""
+    import safetensors
+    import safetensors.torch
+
+    with safetensors.safe_open(str(path), framework="pt") as f:
+        meta = f.metadata()
+        tensors = {k: f.get_tensor(k).clone() for k in f.keys()}
+    change(tensors[key])
+    safetensors.torch.save_file(tensors, str(path), metadata=meta)
+    return path
+
+
+def _poisoned(tmp_path, kind):
+    """A network file for `init` with one NaN or Inf, in the format `kind`."""
+    weights = _init(12)
+    if kind == "safetensors-scale":
+        model = NBRDF()
+        model.weights = weights
+        path = modelio.save(model, "nbrdf", tmp_path / "scale.safetensors")
+        return _with_tensor(path, "output_scale", lambda t: t.__setitem__(1, float("nan")))
+    if kind == "safetensors":
+        model = NBRDF()
+        model.weights = weights
+        path = modelio.save(model, "nbrdf", tmp_path / "weights.safetensors")
+        return _with_tensor(path, "W2", lambda t: t.__setitem__((0, 0), float("inf")))
+    path = write_network(Network(weights), tmp_path / f"start.{kind}")
+    if kind == "npy":
+        vector = np.load(path)
+        vector[100] = np.nan
+        np.save(path, vector)
+    elif kind == "pt":
+        state = torch.load(path, weights_only=True)
+        state["fc3.bias"][2] = -float("inf")
+        torch.save(state, path)
+    return path
+
+
+@pytest.mark.parametrize("kind", ["npy", "pt", "safetensors", "safetensors-scale"])
+def test_an_init_network_with_nan_or_inf_is_refused_naming_the_file(small_dataset, tmp_path, kind):
+    """Weights or an output scale that are not finite would train to NaN (or scale every
+    value to NaN): refused before any fitting, with the file named."""
+    path = _poisoned(tmp_path, kind)
+    with pytest.raises(ModelFileError) as exc:
+        NBRDF(**TINY_PARAMS, init=str(path)).fit(_materials(small_dataset, 1)[0])
+    assert str(path) in str(exc.value) and ("NaN" in str(exc.value) or "non-finite" in str(exc.value))
+
+
+def test_a_saved_output_scale_must_be_the_units_one(tmp_path):
+    model = NBRDF()
+    model.weights = _init(13)
+    path = modelio.save(model, "nbrdf", tmp_path / "scaled.safetensors")
+    _with_tensor(path, "output_scale", lambda t: t.mul_(2.0))
+    with pytest.raises(ModelFileError, match=r"scaled\.safetensors.*'output_scale'.*raw_units=False"):
+        modelio.load(path)
+
+
+def test_a_fitted_model_keeps_its_training_params_and_fit_metadata(small_dataset, tmp_path):
+    model = NBRDF(**TINY_PARAMS).fit(_materials(small_dataset, 1)[0])
+    _, loaded = modelio.load(modelio.save(model, "nbrdf", tmp_path / "fitted.safetensors"))
+    assert loaded.params == model.params and loaded.params["epochs"] == TINY_PARAMS["epochs"]
+    assert loaded.metadata() == model.metadata() and FIT_LOSS_KEY in loaded.metadata()
+
+
 def test_naive_mlp_fits_from_directions(small_dataset):
     target = _materials(small_dataset, 1)[0]
     model = NaiveMLP(**TINY_PARAMS).fit(target, seed=0)
     assert model.fit_info[FIT_LOSS_KEY] < 0.1
     wi, wo = adversarial_pairs(4096, torch.float32, seed=2)["uniform"]
-    x = mlp.encode(wi, wo, "directions")
+    x = nw.encode(wi, wo, "directions")
     assert torch.equal(x, torch.cat((wi, wo), dim=1))
     assert torch.isfinite(model.eval(wi, wo)).all()
 
@@ -268,7 +333,7 @@ def test_naive_mlp_fits_from_directions(small_dataset):
 def test_declared_costs():
     model = NBRDF()
     assert model.nbytes == 4 * 675
-    assert model.flops_per_eval == mlp.RUSINKIEWICZ_FLOPS + mlp.mlp_flops([21, 21])
+    assert model.flops_per_eval == nw.RUSINKIEWICZ_FLOPS + nw.mlp_flops([21, 21])
     assert NaiveMLP(hidden=[32, 32]).nbytes == 4 * (6 * 32 + 32 + 32 * 32 + 32 + 32 * 3 + 3)
 
 
@@ -299,8 +364,6 @@ def test_bad_parameters_name_the_key(params, key):
 
 @pytest.mark.shared_data
 def test_imported_release_network_reproduces_its_table(release):
-    from brdfbench_representations.nbrdf_formats import read_network, to_model
-
     target = release.load("alum-bronze")
     model = to_model(read_network(target.source))
     wi, wo = merl.grid_directions()
@@ -324,11 +387,11 @@ def test_refit_of_an_nbrdf_table_is_accurate():
 # --------------------------------------------------------------------------- the runner's batches
 
 
-def _run_cfg(tmp_path, synthetic_cache, **params):
+def _run_cfg(tmp_path, synthetic_cache, isolate=True, **params):
     return RunConfig(
         representation="nbrdf", representation_params={**TINY_PARAMS, **params}, label="nbrdf", dataset="synthetic",
         dataset_params={"size": "small", "cache_dir": str(synthetic_cache)},
-        harness=HarnessConfig(n_random=4096, throughput_batch=1024), results_dir=tmp_path,
+        harness=harness_config(n_random=4096, throughput_batch=1024), results_dir=tmp_path, isolate=isolate,
     )
 
 
@@ -354,8 +417,8 @@ def test_a_failed_batch_fails_its_materials_and_the_sweep_goes_on(tmp_path, synt
         return original(self, targets, seed=seed, progress=progress)
 
     original = NBRDF.fit_many
-    monkeypatch.setattr(NBRDF, "fit_many", flaky)
-    counts = run(_run_cfg(tmp_path, synthetic_cache, batch_materials=4))
+    monkeypatch.setattr(NBRDF, "fit_many", flaky)  # in this process: the cells run in-process
+    counts = run(_run_cfg(tmp_path, synthetic_cache, isolate=False, batch_materials=4))
     df = ResultsStore(tmp_path / "brdfbench.sqlite").frame()
     failed = df[df.status == "failed"]
     assert (counts["done"], counts["failed"]) == (2, 4)

@@ -1,4 +1,4 @@
-"""NBRDF weight formats (representations/nbrdf_formats.py) and the `brdfbench convert` command.
+"""NBRDF weight formats (brdfbench/nbrdf/formats.py) and the `brdfbench convert` command.
 
 Layouts under test: Keras h5 kernels are (in, out); the flat vector of hyperdiffusion work
 (675 values for 6-21-21-3) is fc1.weight, fc1.bias, fc2.weight, … with torch nn.Linear
@@ -21,11 +21,11 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from brdfbench import merl, modelio, registry
-from brdfbench.data.nbrdf_h5 import layout, read_nbrdf_h5
+from brdfbench.nbrdf import formats as nf
+from brdfbench.nbrdf import network as nw
+from brdfbench.nbrdf.keras_h5 import layout, read_nbrdf_h5
 from brdfbench.errors import BrdfbenchError, DataError, ModelFileError
 from brdfbench.testing import adversarial_pairs
-from brdfbench_representations import mlp
-from brdfbench_representations import nbrdf_formats as nf
 from brdfbench_representations.nbrdf import NBRDF, NaiveMLP
 
 PUBLISHED = (21, 21)
@@ -40,7 +40,7 @@ N_PUBLISHED = 675
 def random_weights(seed: int = 0, scale: float = 0.3, hidden=PUBLISHED) -> dict[str, np.ndarray]:
     """Keras-layout float32 weights (W (in, out), b) with normal entries."""
     rng = np.random.default_rng(seed)
-    return {k: (rng.standard_normal(s) * scale).astype(np.float32) for k, s in mlp.weight_shapes(hidden).items()}
+    return {k: (rng.standard_normal(s) * scale).astype(np.float32) for k, s in nw.weight_shapes(hidden).items()}
 
 
 def torch_weights(seed: int = 0, hidden=PUBLISHED) -> dict[str, torch.Tensor]:
@@ -135,10 +135,10 @@ finite_f32 = st.floats(width=32, allow_nan=False, allow_infinity=False)
 def test_unflatten_inverts_flatten(hidden, data):
     """Any finite weights of any 6 → hidden… → 3 shape survive flatten/unflatten bit for bit."""
     weights = {k: torch.from_numpy(data.draw(hnp.arrays(np.float32, s, elements=finite_f32), label=k))
-               for k, s in mlp.weight_shapes(hidden).items()}
+               for k, s in nw.weight_shapes(hidden).items()}
     vector = nf.flatten(weights)
     assert isinstance(vector, np.ndarray) and vector.dtype == np.float32 and vector.ndim == 1
-    assert vector.size == mlp.n_weights(hidden)
+    assert vector.size == nw.n_weights(hidden)
     assert_same_weights(nf.unflatten(vector, hidden), weights)
     assert np.array_equal(nf.flatten(nf.unflatten(vector, hidden)).view(np.int32), vector.view(np.int32))
 
@@ -151,7 +151,7 @@ def test_unflatten_of_a_torch_vector_equals_that_of_numpy(hidden, seed):
 
 
 def test_published_network_has_675_weights():
-    assert mlp.n_weights(PUBLISHED) == N_PUBLISHED
+    assert nw.n_weights(PUBLISHED) == N_PUBLISHED
     assert nf.flatten(torch_weights()).shape == (N_PUBLISHED,)
     assert nf.unflatten(np.zeros(N_PUBLISHED, np.float32))["W1"].shape == (6, 21)
 
@@ -179,12 +179,12 @@ def test_vector_order_is_that_of_nn_linear_parameters(hidden):
         layers += [torch.nn.Linear(a, b), torch.nn.ReLU()]
     net = torch.nn.Sequential(*layers[:-1])
     vector = torch.cat([p.detach().reshape(-1) for p in net.parameters()])
-    assert vector.numel() == mlp.n_weights(hidden)
+    assert vector.numel() == nw.n_weights(hidden)
     weights = nf.unflatten(vector, hidden)
-    assert mlp.hidden_of(weights) == list(hidden)
+    assert nw.hidden_of(weights) == list(hidden)
     x = torch.randn(512, 6)
     with torch.no_grad():
-        torch.testing.assert_close(mlp.last_layer(weights, x), net(x), rtol=1e-5, atol=1e-6)
+        torch.testing.assert_close(nw.last_layer(weights, x), net(x), rtol=1e-5, atol=1e-6)
     assert np.array_equal(nf.flatten(weights), vector.numpy())
 
 
@@ -194,10 +194,10 @@ def test_from_torch_state_matches_the_module(module):
     net = module()
     state = net.state_dict()
     weights = nf.from_torch_state(state)
-    assert mlp.hidden_of(weights) == list(PUBLISHED)
+    assert nw.hidden_of(weights) == list(PUBLISHED)
     x = torch.randn(512, 6)
     with torch.no_grad():
-        torch.testing.assert_close(mlp.last_layer(weights, x), net(x), rtol=1e-5, atol=1e-6)
+        torch.testing.assert_close(nw.last_layer(weights, x), net(x), rtol=1e-5, atol=1e-6)
     # the state dict's parameter order is the flat vector's order
     assert np.array_equal(nf.flatten(weights), torch.cat([p.reshape(-1) for p in state.values()]).numpy())
 
@@ -208,13 +208,13 @@ def test_to_torch_state_loads_into_nn_linear_stack():
     net.load_state_dict(nf.to_torch_state(weights), strict=True)
     x = torch.randn(256, 6)
     with torch.no_grad():
-        torch.testing.assert_close(net(x), mlp.last_layer(weights, x), rtol=1e-5, atol=1e-6)
+        torch.testing.assert_close(net(x), nw.last_layer(weights, x), rtol=1e-5, atol=1e-6)
     assert_same_weights(nf.from_torch_state(nf.to_torch_state(weights)), weights)
 
 
 def test_from_torch_state_infers_hidden_sizes():
     state = FcNet((9, 4, 11)).state_dict()
-    assert mlp.hidden_of(nf.from_torch_state(state)) == [9, 4, 11]
+    assert nw.hidden_of(nf.from_torch_state(state)) == [9, 4, 11]
 
 
 # --------------------------------------------------------------------------- file round trips
@@ -643,6 +643,55 @@ def test_convert_raw_units_and_features_reach_the_model_file(tmp_path):
     assert name == "naive_mlp" and model.params["raw_units"] is True
     assert torch.equal(model.output_scale, torch.tensor(merl.CHANNEL_SCALES, dtype=torch.float32))
     assert_same_weights(model.weights, weights)
+
+
+TRAINING_PARAMS = ("epochs", "batch_size", "lr", "schedule", "n_samples", "output", "patience", "min_improvement",
+                   "batch_materials", "init")
+
+
+def test_a_converted_network_records_only_what_is_true_of_it(tmp_path):
+    """`convert X.h5 Y.safetensors` trains nothing: the model file holds the architecture
+    and units (params), the encoding and the source (metadata), and `inspect` shows no
+    training parameter or fit result."""
+    src, dest = tmp_path / "mat.h5", tmp_path / "mat.safetensors"
+    write_h5(src, random_weights(43))
+    assert brdfbench("convert", src, dest, cwd=tmp_path).returncode == 0
+    name, model = modelio.load(dest)
+    assert name == "nbrdf"
+    assert model.params == {"hidden": [21, 21], "raw_units": False}
+    assert model.metadata() == {"source": str(src), "features": "rusinkiewicz"}
+    out = brdfbench("inspect", dest, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "'hidden': [21, 21]" in out.stdout and "'raw_units': False" in out.stdout
+    assert f"source: {src}" in out.stdout and "features: rusinkiewicz" in out.stdout
+    for key in (*TRAINING_PARAMS, "fit_loss", "fitted_to"):
+        assert f"'{key}'" not in out.stdout and f"{key}:" not in out.stdout, key
+
+
+def test_a_converted_model_converts_again_with_its_own_record(tmp_path):
+    """Saved again or converted again, a converted model still records no training."""
+    first, second = tmp_path / "a.safetensors", tmp_path / "b.safetensors"
+    nf.write_network(nf.Network(torch_weights(44), features="directions", raw_units=True, source="w.pt"), first)
+    _, model = modelio.load(first)
+    _, resaved = modelio.load(modelio.save(model, "naive_mlp", tmp_path / "again.safetensors"))
+    assert resaved.params == {"hidden": [21, 21], "raw_units": True} and resaved.metadata()["source"] == "w.pt"
+    nf.write_network(nf.read_network(first), second)
+    name, model = modelio.load(second)
+    assert name == "naive_mlp" and model.params == {"hidden": [21, 21], "raw_units": True}
+    assert model.metadata() == {"source": str(first), "features": "directions"}
+
+
+def test_an_h5_with_an_extra_layer_is_refused_by_convert(tmp_path):
+    src, dest = tmp_path / "deeper.h5", tmp_path / "out.npy"
+    write_h5(src, random_weights(46))
+    with h5py.File(src, "a") as f:
+        f.create_dataset("dense_4/dense_4/kernel:0", data=np.zeros((3, 3), np.float32))
+        f.create_dataset("dense_4/dense_4/bias:0", data=np.zeros(3, np.float32))
+    with pytest.raises(ModelFileError, match=r"deeper\.h5.*'dense_4/dense_4/bias:0'.*layer 'dense_4'"):
+        nf.read_network(src)
+    out = brdfbench("convert", src, dest, cwd=tmp_path)
+    assert out.returncode == 2 and str(src) in out.stderr and "dense_4" in out.stderr
+    assert not dest.exists()
 
 
 def _wrong_length(tmp_path):

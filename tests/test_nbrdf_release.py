@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import os
+import shutil
 
 import h5py
 import numpy as np
@@ -11,9 +13,11 @@ import torch
 
 from brdfbench import coords, merl
 from brdfbench.data import nbrdf_release
-from brdfbench.data.nbrdf_h5 import LAYOUT, MAX_LOG_VALUE, nbrdf_forward, nbrdf_input, nbrdf_table, read_nbrdf_h5
+from brdfbench.data.nbrdf_h5 import nbrdf_table
 from brdfbench.data.nbrdf_release import find_release_dir, nbrdf_release_dataset
 from brdfbench.errors import ConfigError, DataError
+from brdfbench.nbrdf.keras_h5 import LAYOUT, read_nbrdf_h5
+from brdfbench.nbrdf.network import MAX_LOG_VALUE, forward, rusinkiewicz_input
 
 SHAPES = {name: shape for name, (_, shape) in LAYOUT.items()}
 
@@ -114,6 +118,49 @@ def test_external_link_refused(tmp_path):
         read_nbrdf_h5(p)
 
 
+@pytest.mark.parametrize("extra, named", [
+    ({"dense_4/dense_4/kernel:0": (3, 3), "dense_4/dense_4/bias:0": (3,)}, "layer 'dense_4' is beyond the 3 dense"),
+    ({"dense_2/dense_2/scale:0": (21,)}, "'dense_2/dense_2/scale:0'"),
+    ({"lambda_1/weights:0": (4,)}, "'lambda_1/weights:0'"),
+    ({"optimizer_weights/m:0": (4,)}, "'optimizer_weights/m:0'"),
+], ids=["extra-layer", "extra-weight", "weights-in-the-lambda", "other-group"])
+def test_entries_beyond_the_layout_are_refused(tmp_path, extra, named):
+    """Weights the 6-21-21-3 layout does not have (an extra layer most of all) are refused,
+    not silently dropped from the network read."""
+    p = tmp_path / "deeper.h5"
+    write_h5(p, random_weights())
+    with h5py.File(p, "a") as f:
+        for key, shape in extra.items():
+            f.create_dataset(key, data=np.zeros(shape, np.float32))
+    with pytest.raises(DataError) as exc:
+        read_nbrdf_h5(p)
+    msg = str(exc.value)
+    assert "deeper.h5" in msg and named in msg and "unexpected entry" in msg
+
+
+def test_a_link_beyond_the_layout_is_refused(tmp_path):
+    p = tmp_path / "alias.h5"
+    write_h5(p, random_weights())
+    with h5py.File(p, "a") as f:
+        f["dense_1/alias"] = h5py.SoftLink("/dense_1/dense_1/kernel:0")
+    with pytest.raises(DataError, match=r"alias\.h5: unexpected entry 'dense_1/alias'"):
+        read_nbrdf_h5(p)
+
+
+def test_a_deeper_network_reads_with_its_hidden_widths(tmp_path):
+    from brdfbench.nbrdf.keras_h5 import layout
+
+    hidden = (21, 21, 21)
+    p = tmp_path / "deep.h5"
+    rng = np.random.default_rng(5)
+    with h5py.File(p, "w") as f:
+        for key, shape in layout(hidden).values():
+            f.create_dataset(key, data=rng.standard_normal(shape).astype(np.float32))
+    assert len(read_nbrdf_h5(p, hidden=hidden)) == 8
+    with pytest.raises(DataError, match=r"deep\.h5.*dense_3/dense_3/kernel:0.*wrong shape"):
+        read_nbrdf_h5(p)
+
+
 def test_not_hdf5(tmp_path):
     p = tmp_path / "fake.h5"
     p.write_bytes(b"definitely not an HDF5 file" * 10)
@@ -141,7 +188,7 @@ def test_forward_hand_computed():
     w["W3"][1] = [5.0, 5.0, 5.0]
     w["b3"][:] = [0.0, math.log(2.0), 0.0]
     x = torch.tensor([[1.0, 3.0, 0, 0, 0, 0], [0.0, 0, 0, 0, 0, 0]], dtype=torch.float64)
-    y = nbrdf_forward(w, x)
+    y = forward(w, x)
     expected = torch.tensor([[math.e - 1, 1.0, 0.0], [0.0, 1.0, 0.0]], dtype=torch.float64)
     torch.testing.assert_close(y, expected, rtol=1e-6, atol=1e-6)  # ln 2 is stored in float32
 
@@ -150,7 +197,7 @@ def test_forward_hand_computed():
 def test_forward_matches_numpy(dtype):
     w = random_weights(seed=1)
     x = np.random.default_rng(2).uniform(-1, 1, size=(64, 6))
-    y = nbrdf_forward(w, torch.tensor(x, dtype=dtype))
+    y = forward(w, torch.tensor(x, dtype=dtype))
     assert y.dtype == dtype and y.shape == (64, 3)
     ref = reference_forward(w, x)
     assert (ref > 0).any() and (ref == 0).any()  # both branches of the final clamp exercised
@@ -163,7 +210,7 @@ def test_overflow_guard(dtype):
     w = random_weights()
     w["b3"] = np.array([1e4, 1e30, -1e4], np.float32)
     x = torch.rand(10, 6, dtype=dtype)
-    y = nbrdf_forward(w, x)
+    y = forward(w, x)
     assert torch.isfinite(y).all()
     torch.testing.assert_close(y[:, 0], torch.full((10,), math.expm1(MAX_LOG_VALUE), dtype=dtype))
     assert (y[:, 2] == 0).all()
@@ -173,11 +220,11 @@ def test_input_layout():
     th, ph, td, pd = 0.3, 0.7, 0.4, 4.0  # φd > π: must not be folded
     t = lambda v: torch.tensor([v], dtype=torch.float64)  # noqa: E731
     wi, wo = coords.from_half_diff(t(th), t(ph), t(td), t(pd))
-    x = nbrdf_input(wi, wo)
+    x = rusinkiewicz_input(wi, wo)
     expected = [math.sin(th), 0.0, math.cos(th), math.sin(td) * math.cos(pd), math.sin(td) * math.sin(pd), math.cos(td)]
     assert x.shape == (1, 6) and x.dtype == torch.float64
     np.testing.assert_allclose(x[0].numpy(), expected, atol=1e-12)
-    assert nbrdf_input(wi.float(), wo.float()).dtype == torch.float32
+    assert rusinkiewicz_input(wi.float(), wo.float()).dtype == torch.float32
 
 
 def test_table_from_synthetic_weights():
@@ -192,7 +239,7 @@ def test_table_from_synthetic_weights():
     # Table order: cell (i, j, k) holds the network at that cell's centre.
     idx = np.random.default_rng(4).integers(0, merl.N_CELLS, 200)
     idx = idx[above.reshape(-1)[idx]]
-    direct = nbrdf_forward(w, nbrdf_input(wi[idx], wo[idx])).numpy()
+    direct = forward(w, rusinkiewicz_input(wi[idx], wo[idx])).numpy()
     flat = table.values.reshape(3, -1)[:, idx].T
     np.testing.assert_allclose(flat, direct, rtol=1e-4, atol=1e-6)
 
@@ -226,6 +273,28 @@ def test_dataset_fingerprint_changes(fake_release):
     before = nbrdf_release_dataset(str(fake_release)).fingerprint
     write_h5(fake_release / "merl" / "beta.h5", random_weights(seed=9))
     assert nbrdf_release_dataset(str(fake_release)).fingerprint != before
+
+
+def test_dataset_fingerprint_sees_a_network_replaced_by_another_of_the_same_size(fake_release):
+    """Every published network is 18736 bytes: the fingerprint must follow the content."""
+    before = nbrdf_release_dataset(str(fake_release)).fingerprint
+    alpha, zeta = fake_release / "merl" / "alpha.h5", fake_release / "merl" / "zeta.h5"
+    size, mtime = zeta.stat().st_size, zeta.stat().st_mtime_ns
+    zeta.write_bytes(alpha.read_bytes())
+    os.utime(zeta, ns=(mtime, mtime))
+    assert zeta.stat().st_size == size
+    assert nbrdf_release_dataset(str(fake_release)).fingerprint != before
+
+
+@pytest.mark.shared_data
+def test_published_network_swapped_for_another_is_new_data(release, tmp_path):
+    root = tmp_path / "release"
+    (root / "merl").mkdir(parents=True)
+    for name in ("alum-bronze", "white-paint"):
+        shutil.copy(release / "merl" / f"{name}.h5", root / "merl" / f"{name}.h5")
+    before = nbrdf_release_dataset(str(root)).fingerprint
+    shutil.copy(release / "merl" / "black-obsidian.h5", root / "merl" / "white-paint.h5")
+    assert nbrdf_release_dataset(str(root)).fingerprint != before
 
 
 def test_dataset_errors(fake_release, tmp_path):

@@ -17,7 +17,7 @@ from brdfbench.render import sphere
 from brdfbench.render.camera import Camera
 from brdfbench.render.closed_form import ClosedForm
 from brdfbench.render.simulate import build_simulator
-from brdfbench.runner import HarnessConfig, RunConfig, run
+from brdfbench.runner import RunConfig, harness_config, run
 from brdfbench.specs import RepresentationSpec
 from brdfbench.store import ResultsStore
 from brdfbench_representations.lambert import Lambert
@@ -154,7 +154,7 @@ def test_a_nan_inside_a_render_is_reported_with_the_material():
 
 # --------------------------------------------------------------------------- the harness in the runner
 
-RENDER = HarnessConfig(kind="render", metrics=("psnr_ldr", "ssim_ldr", "flip_ldr", "rmse_hdr"))
+RENDER = harness_config(kind="render", metrics=("psnr_ldr", "ssim_ldr", "flip_ldr", "rmse_hdr"))
 
 
 def _cfg(tmp_path, synthetic_cache, name="lambert", **kw):
@@ -193,16 +193,20 @@ def test_merl_renders_its_own_reference_exactly(tmp_path, synthetic_cache):
 
 
 @pytest.mark.parametrize("harness, scene, match", [
-    (HarnessConfig(), "sphere_directional", "scene 'sphere_directional' is rendered: use harness=render"),
+    (harness_config(), "sphere_directional", "scene 'sphere_directional' is rendered: use harness=render"),
     (RENDER, "brdf_space", "harness=render needs a rendered scene"),
-    (HarnessConfig(metrics=("l1", "psnr_ldr")), "brdf_space", "'psnr_ldr' is measured on 'image'"),
-    (HarnessConfig(kind="render", metrics=("psnr_ldr", "l1_log")), "sphere_directional", "'l1_log' is measured on 'merl_grid'"),
-    (HarnessConfig(kind="sideways"), "brdf_space", "harness.kind 'sideways'"),
+    (harness_config(metrics=("l1", "psnr_ldr")), "brdf_space", "'psnr_ldr' is measured on 'image'"),
+    (harness_config(kind="render", metrics=("psnr_ldr", "l1_log")), "sphere_directional", "'l1_log' is measured on 'merl_grid'"),
 ])
 def test_metrics_that_do_not_fit_the_harness_or_scene_stop_the_run_up_front(tmp_path, synthetic_cache, harness, scene, match):
     with pytest.raises(ConfigError, match=match):
         run(_cfg(tmp_path, synthetic_cache, harness=harness, scene=scene))
     assert not (tmp_path / "renders").exists()
+
+
+def test_an_unknown_harness_kind_lists_the_harnesses():
+    with pytest.raises(ConfigError, match="harness.kind 'sideways'.*Registered: accuracy, convergence, render"):
+        harness_config(kind="sideways")
 
 
 def test_unknown_scene_params_are_refused(tmp_path, synthetic_cache):
@@ -271,7 +275,7 @@ def test_the_xml_scene_renders_every_kind_of_kernel():
     sim = build_simulator(scene)
     for model in (_lambert_model(), NBRDF()):
         if isinstance(model, NBRDF):
-            from brdfbench_representations.mlp import glorot_init
+            from brdfbench.nbrdf.network import glorot_init
 
             model.weights = glorot_init(model.hidden, torch.Generator().manual_seed(0))
         image = sim.render(model, material="m")

@@ -139,7 +139,7 @@ def test_direct_mis_backends_agree_within_monte_carlo_error():
 def test_the_direct_bsdf_call_renders_as_the_virtual_call(kind, monkeypatch):
     """A one-shape scene calls its BSDF directly (no dispatch); forcing Mitsuba's per-lane
     virtual call instead renders the same image, for a table, an MLP and an analytic model."""
-    from brdfbench.render import mitsuba_sim
+    from brdfbench.render import mitsuba_integrators
 
     table = registry.get("representations", "merl").create().fit(reference_material())
     mlp = registry.get("representations", "nbrdf").create(epochs=1, n_samples=20_000).fit(reference_material())
@@ -147,7 +147,7 @@ def test_the_direct_bsdf_call_renders_as_the_virtual_call(kind, monkeypatch):
              else scenes.sphere_envmap(width=SIZE, height=SIZE, spp=8, lights=SUN))
     models = {"merl": table, "nbrdf": mlp, "ggx": _ggx()}
     direct = {name: build_simulator(scene, name=kind).render(m, seed=3) for name, m in models.items()}
-    monkeypatch.setattr(mitsuba_sim, "scene_bsdf", lambda scene, si, ray: si.bsdf(ray))
+    monkeypatch.setattr(mitsuba_integrators, "scene_bsdf", lambda scene, si, ray: si.bsdf(ray))
     for name, m in models.items():
         virtual = build_simulator(scene, name=kind).render(m, seed=3)
         assert float(virtual.mean()) > 0.001, name

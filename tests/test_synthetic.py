@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -201,6 +202,59 @@ def test_damaged_cache_file_is_regenerated(tmp_path):
     m = ds.load(name)
     assert m.table.raw.shape == (3, *merl.SHAPE)
     assert (folder / f"{name}.binary").stat().st_size == merl.FILE_BYTES
+
+
+def test_tampered_cache_file_is_regenerated_with_a_warning(tmp_path, caplog):
+    """A valid MERL file of the same size put in the cache is not this material: regenerate it."""
+    ds = S.synthetic_dataset(1, cache_dir=str(tmp_path))
+    name = ds.materials[0]
+    original = ds.load(name).table.raw
+    path = tmp_path / "synthetic" / f"{S.GENERATOR_VERSION}-seed0" / f"{name}.binary"
+    merl.write_binary(path, merl.MerlTable(np.full((3, *merl.SHAPE), 0.5)))
+    assert path.stat().st_size == merl.FILE_BYTES
+    again = S.synthetic_dataset(1, cache_dir=str(tmp_path))
+    with caplog.at_level("WARNING", logger="brdfbench.data.synthetic"):
+        m = again.load(name)
+    assert np.array_equal(m.table.raw, original)
+    assert any(str(path) in r.getMessage() and "regenerating" in r.getMessage() for r in caplog.records)
+    assert again.fingerprint == ds.fingerprint == f"synthetic-{S.GENERATOR_VERSION}-seed0"
+
+
+def test_untampered_cache_is_reused_and_its_digest_cached(tmp_path, monkeypatch):
+    from brdfbench.data import content_hash
+
+    ds = S.synthetic_dataset(1, cache_dir=str(tmp_path))
+    name = ds.materials[0]
+    ds.load(name)
+    path = tmp_path / "synthetic" / f"{S.GENERATOR_VERSION}-seed0" / f"{name}.binary"
+    assert (path.parent / f"{name}.binary.sha256").read_text().strip() == content_hash.sha256_file(path)
+    old = 1_000_000_000 * 10**9
+    os.utime(path, ns=(old, old))  # settled: its digest may be cached
+    S.synthetic_dataset(1, cache_dir=str(tmp_path)).load(name)
+
+    def boom(*args, **kwargs):
+        raise AssertionError("regenerated or re-hashed an untampered cache file")
+
+    monkeypatch.setattr(S, "generate_material", boom)
+    monkeypatch.setattr(content_hash, "sha256_file", boom)
+    assert S.synthetic_dataset(1, cache_dir=str(tmp_path)).load(name).source == str(path)
+
+
+def test_cache_file_without_a_record_is_regenerated_and_compared(tmp_path, caplog):
+    ds = S.synthetic_dataset(1, cache_dir=str(tmp_path))
+    name = ds.materials[0]
+    original = ds.load(name).table.raw
+    folder = tmp_path / "synthetic" / f"{S.GENERATOR_VERSION}-seed0"
+    record = folder / f"{name}.binary.sha256"
+    record.unlink()  # as a cache written before records existed
+    with caplog.at_level("WARNING", logger="brdfbench.data.synthetic"):
+        assert np.array_equal(ds.load(name).table.raw, original)
+    assert record.is_file() and not caplog.records  # identical bytes: nothing to warn about
+    record.unlink()
+    merl.write_binary(folder / f"{name}.binary", merl.MerlTable(np.full((3, *merl.SHAPE), 0.5)))
+    with caplog.at_level("WARNING", logger="brdfbench.data.synthetic"):
+        assert np.array_equal(ds.load(name).table.raw, original)
+    assert any("differed from the generator" in r.getMessage() for r in caplog.records)
 
 
 # --------------------------------------------------------------------------- physics sanity

@@ -10,13 +10,42 @@ from ..errors import DataError
 if TYPE_CHECKING:  # keep `import brdfbench.data.specs` light: listing plugins must not import torch
     from ..protocol import Material
 
+#: Largest plausible BRDF value (1/sr). The brightest measured specular peaks reach a few
+#: thousand; values far above (1e300 in a damaged file) are corruption, and overflow fp32 metrics.
+MAX_VALUE = 1e7
+_WHAT_TO_DO = "replace or remove the file, or pick other materials with materials=[...]"
+
+
+def check_table(material: Material) -> None:
+    """Refuse a table no metric can score: no valid cell, non-finite cells, absurd values."""
+    import numpy as np
+
+    from ..merl import CHANNEL_SCALES
+
+    where = material.source or f"material {material.name!r}"
+    raw = material.table.raw
+    bad = ~np.isfinite(raw)
+    if bad.any():
+        c, i, j, k = (int(x) for x in np.argwhere(bad)[0])
+        raise DataError(f"{where}: {int(bad.sum())} non-finite (NaN/Inf) cells, first at channel {c}, index ({i}, {j}, {k}); "
+                        f"the table is corrupt: {_WHAT_TO_DO}")
+    valid = material.table.valid
+    if not valid.any():
+        raise DataError(f"{where}: no valid (non-negative) cells: every cell is marked invalid; "
+                        f"not a usable measurement: {_WHAT_TO_DO}")
+    peak = max(float(channel.max()) * scale for channel, scale in zip(raw, CHANNEL_SCALES))  # invalid cells are < 0
+    if peak > MAX_VALUE:
+        raise DataError(f"{where}: BRDF value {peak:.3g} 1/sr, above the plausible maximum {MAX_VALUE:.0e}; "
+                        f"the table is corrupt (or not in MERL units): {_WHAT_TO_DO}")
+
 
 @dataclass(frozen=True)
 class Dataset:
     """Material names plus a loader; materials load lazily (a full table is 35 MB).
 
-    `fingerprint` identifies the content (e.g. generator version + seed, or file sizes and
-    mtimes) so the results store can tell a re-run of the same data from new data.
+    `fingerprint` identifies the content (e.g. generator version + seed, or the files'
+    sha256) so the results store can tell a re-run of the same data from new data. `load`
+    checks each table once (`check_table`), so unusable data stops the run naming the file.
     """
 
     name: str
@@ -28,7 +57,9 @@ class Dataset:
     def load(self, material: str) -> Material:
         if material not in self.materials:
             raise DataError(f"dataset {self.name!r} has no material {material!r}; it has {len(self.materials)} materials")
-        return self.loader(material)
+        loaded = self.loader(material)
+        check_table(loaded)
+        return loaded
 
     def category(self, material: str) -> str:
         return (self.categories or {}).get(material, "unknown")

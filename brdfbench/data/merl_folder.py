@@ -5,47 +5,90 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import stat
 from pathlib import Path
 
 from ..errors import DataError
 from ..merl import read_binary
 from ..protocol import Material
 from . import Dataset
+from .content_hash import file_digests
 
 SUFFIX = ".binary"
-FINGERPRINT_VERSION = 1
+#: 2: files are fingerprinted by content (sha256), no longer by size and mtime.
+FINGERPRINT_VERSION = 2
+_HINT = "pass the folder holding your MERL .binary files as dataset.params.path"
+
+
+def _why(exc: OSError) -> str:
+    if isinstance(exc, PermissionError):
+        return "permission denied"
+    return exc.strerror or str(exc)
+
+
+def _check_folder(folder: Path) -> None:
+    """A clear message for a path that is missing, a file, or not reachable."""
+    try:
+        st = os.stat(folder)
+    except (FileNotFoundError, NotADirectoryError):
+        raise DataError(f"{folder}: MERL folder does not exist; {_HINT}") from None
+    except OSError as exc:
+        raise DataError(f"{folder}: cannot reach MERL folder ({_why(exc)}); {_HINT}") from None
+    if stat.S_ISDIR(st.st_mode):
+        return
+    if folder.suffix == SUFFIX:
+        raise DataError(f"{folder}: is a MERL file, not a directory; pass its folder ({folder.parent}) as dataset.params.path")
+    raise DataError(f"{folder}: is a file, not a directory; {_HINT}")
+
+
+def _list(folder: Path, recursive: bool) -> dict[str, Path]:
+    """Material name -> file, for the `.binary` files in `folder`; an unlistable folder raises."""
+    files: dict[str, Path] = {}
+    pending = [folder]
+    while pending:
+        current = pending.pop()
+        try:
+            with os.scandir(current) as it:
+                entries = list(it)
+        except OSError as exc:
+            fix = "; check its permissions" if isinstance(exc, PermissionError) else ""
+            raise DataError(f"{current}: cannot list MERL folder ({_why(exc)}){fix}") from None
+        for entry in entries:
+            try:
+                if entry.is_dir(follow_symlinks=False):
+                    if recursive:
+                        pending.append(Path(entry.path))
+                elif entry.name.endswith(SUFFIX) and entry.is_file():
+                    path = Path(entry.path)
+                    files[path.relative_to(folder).with_suffix("").as_posix()] = path
+            except OSError as exc:
+                raise DataError(f"{entry.path}: cannot stat ({_why(exc)})") from None
+    return files
 
 
 def merl_folder_dataset(path: str | os.PathLike, recursive: bool = False) -> Dataset:
     """The `.binary` files in `path` (and its subfolders if `recursive`), sorted by name.
 
     Material names are the file stems; with `recursive`, files below the top level are
-    named by their relative path without the suffix (e.g. "metals/chrome"). Files are
-    read and validated on load; faults raise `DataError` naming the file.
+    named by their relative path without the suffix (e.g. "metals/chrome"). The
+    fingerprint is the sha256 of every file (cached by size and mtime, see
+    `content_hash`), so replacing a file by another of the same size is new data. Files
+    are read and validated on load; faults raise `DataError` naming the file.
     """
     if path is None or str(path) == "":
-        raise DataError("merl_folder: no folder given; pass the path of a folder of MERL .binary files")
+        raise DataError(f"merl_folder: no folder given; {_HINT}")
     folder = Path(path).expanduser()
-    if not folder.exists():
-        raise DataError(f"{folder}: MERL folder does not exist")
-    if not folder.is_dir():
-        raise DataError(f"{folder}: is not a directory; expected a folder of MERL .binary files")
-    try:
-        found = folder.rglob(f"*{SUFFIX}") if recursive else folder.glob(f"*{SUFFIX}")
-        files = {p.relative_to(folder).with_suffix("").as_posix(): p for p in found if p.is_file()}
-    except OSError as exc:
-        raise DataError(f"{folder}: cannot list MERL folder ({exc.strerror or exc})") from None
+    _check_folder(folder)
+    files = _list(folder, recursive)
     if not files:
-        raise DataError(f"{folder}: is not a MERL folder: no {SUFFIX} files")
+        raise DataError(f"{folder}: is not a MERL folder: no {SUFFIX} files; {_HINT}")
     names = tuple(sorted(files))
 
-    entries = []
-    for n in names:
-        try:
-            st = files[n].stat()
-        except OSError as exc:
-            raise DataError(f"{files[n]}: cannot stat MERL file ({exc.strerror or exc})") from None
-        entries.append((n, st.st_size, st.st_mtime_ns))
+    try:
+        digests = file_digests([files[n] for n in names])
+    except OSError as exc:
+        raise DataError(f"{exc.filename or folder}: cannot read MERL file ({_why(exc)})") from None
+    entries = list(zip(names, digests))
     digest = hashlib.sha256(json.dumps([FINGERPRINT_VERSION, entries]).encode()).hexdigest()[:16]
 
     def load(name: str) -> Material:

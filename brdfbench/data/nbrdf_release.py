@@ -18,12 +18,14 @@ from pathlib import Path
 from ..errors import ConfigError, DataError
 from ..protocol import Material
 from . import Dataset
-from .nbrdf_h5 import nbrdf_table, read_nbrdf_h5
+from ..nbrdf.keras_h5 import read_nbrdf_h5
+from .nbrdf_h5 import nbrdf_table
 
 ENV_VAR = "BRDFBENCH_NBRDF_DIR"
 RELATIVE = Path("shared", "data", "neural-brdf")
 SUBSETS = ("merl", "nielsen", "rgl-isotropic")
-FINGERPRINT_VERSION = 1
+#: 2: networks are fingerprinted by content (sha256): all published ones have the same size.
+FINGERPRINT_VERSION = 2
 
 
 def _search_roots() -> list[Path]:
@@ -91,7 +93,12 @@ def nbrdf_release_dataset(path: str | None = None, subset: str = "merl", limit: 
         raise DataError(f"{folder}: no .h5 files; not an NBRDF release subset")
     names = tuple(sorted(files))
 
-    entries = [(n, files[n].stat().st_size) for n in names]
+    from .content_hash import file_digests
+
+    try:
+        entries = list(zip(names, file_digests([files[n] for n in names])))
+    except OSError as exc:
+        raise DataError(f"{exc.filename or folder}: cannot read NBRDF network ({exc.strerror or exc})") from None
     digest = hashlib.sha256(json.dumps([FINGERPRINT_VERSION, subset, entries]).encode()).hexdigest()[:16]
     fingerprint = f"nbrdf_release:{subset}:{digest}"
 

@@ -25,8 +25,8 @@ depends only on (seed, i), never on the dataset size.
 
 from __future__ import annotations
 
+import logging
 import math
-import os
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
@@ -36,11 +36,15 @@ import numpy as np
 import torch
 
 from .. import merl
+from ..atomic import replacing
 from ..coords import half_vector
 from ..errors import ConfigError, DataError
 from ..merl import MerlTable
 from ..protocol import Material
 from . import Dataset
+from .content_hash import DigestCache, cache_root, sha256_file
+
+log = logging.getLogger(__name__)
 
 #: Bump when the generator's output changes: it names the cache folder and the fingerprint.
 GENERATOR_VERSION = "v1"
@@ -560,29 +564,62 @@ def material_names(size: str | int = "default", seed: int = 0) -> tuple[str, ...
     return tuple(material_params(i, seed).name for i in range(_resolve_size(size)))
 
 
-def cache_root(cache_dir: str | os.PathLike | None = None) -> Path:
-    """`cache_dir`, else $BRDFBENCH_CACHE, else ~/.cache/brdfbench."""
-    root = cache_dir if cache_dir is not None else os.environ.get("BRDFBENCH_CACHE") or "~/.cache/brdfbench"
-    return Path(root).expanduser()
+def _recorded_digest(record: Path) -> str | None:
+    """The sha256 recorded when the cache file was generated; None if there is none."""
+    try:
+        text = record.read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+    return text if len(text) == 64 and all(c in "0123456789abcdef" for c in text) else None
 
 
 def synthetic_dataset(size: str | int = "default", seed: int = 0, cache_dir: str | None = None) -> Dataset:
-    """The embedded default dataset; each material's `.binary` file is generated on first load."""
+    """The embedded default dataset; each material's `.binary` file is generated on first load.
+
+    Beside each cache file, `NAME.binary.sha256` records the digest of the file as generated.
+    A cache file whose content no longer matches it (edited, replaced, damaged) is
+    regenerated with a warning; one without a record (an older cache) is regenerated and
+    compared. The fingerprint is the generator version and seed: the same data whatever
+    the state of the cache.
+    """
     n = _resolve_size(size)
     _check_seed(seed)
     seed = int(seed)
     params = [material_params(i, seed) for i in range(n)]
     index = {p.name: p.index for p in params}
     folder = cache_root(cache_dir) / "synthetic" / f"{GENERATOR_VERSION}-seed{seed}"
+    digests = DigestCache(cache_dir)
+
+    def cached(name: str, path: Path, record: Path) -> tuple[Material | None, str | None]:
+        """The cached material if its content is as generated; else None and the file's digest."""
+        if not path.exists():
+            return None, None
+        try:
+            actual = digests.digest(path)
+        except OSError:
+            return None, None
+        finally:
+            digests.save()
+        expected = _recorded_digest(record)
+        if expected is not None and actual != expected:
+            log.warning("%s: content differs from the generated file (sha256 %s..., recorded %s...); regenerating it",
+                        path, actual[:12], expected[:12])
+            return None, None
+        if expected is None:
+            return None, actual  # no record: regenerate, then compare
+        try:
+            table = merl.read_binary(path)
+        except DataError as exc:
+            log.warning("%s; regenerating it", exc)
+            return None, None
+        return Material(name, table, params[index[name]].category, source=str(path)), None
 
     def load(name: str) -> Material:
         path = folder / f"{name}.binary"
-        if path.exists():
-            try:
-                table = merl.read_binary(path)
-                return Material(name, table, params[index[name]].category, source=str(path))
-            except DataError:
-                pass  # a damaged cache file: regenerate it below
+        record = folder / f"{name}.binary.sha256"
+        material, unrecorded = cached(name, path, record)
+        if material is not None:
+            return material
         try:
             folder.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -590,8 +627,13 @@ def synthetic_dataset(size: str | int = "default", seed: int = 0, cache_dir: str
         _, category, table = generate_material(index[name], seed)
         try:
             merl.write_binary(path, table)
+            digest = sha256_file(path)
+            with replacing(record) as tmp:
+                tmp.write_text(digest + "\n", encoding="ascii")
         except OSError as exc:
             raise DataError(f"{path}: cannot write the synthetic material ({exc.strerror or exc})") from None
+        if unrecorded is not None and unrecorded != digest:
+            log.warning("%s: cached file differed from the generator's output; regenerated it", path)
         return Material(name, merl.read_binary(path), category, source=str(path))
 
     return Dataset(

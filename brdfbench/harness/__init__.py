@@ -1,8 +1,27 @@
-"""Harnesses: each measures one aspect of a fitted representation and returns Measurements."""
+"""Harnesses: plugins (group `brdfbench.harnesses`) that measure fitted representations.
+
+A harness owns a typed config (a `HarnessConfig` subclass: its keys, types and ranges are
+checked before any work), its up-front validation against the scene and metrics, the
+fields that enter the configuration hash (all but run control such as time limits), and
+its measuring. It is built once per job inside the worker process that runs the job's
+cells, so what it builds (simulators, reference renders, direction sets) is reused for
+every material. `scope` says whether it scores one material at a time ("material") or a
+whole sample set at once ("set").
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import dataclasses
+import types
+import typing
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+from ..errors import ConfigError
+
+DTYPES = ("float32", "float64")
 
 
 @dataclass(frozen=True)
@@ -11,3 +30,155 @@ class Measurement:
     value: float
     unit: str
     higher_is_better: bool
+    spp: int = 0  # samples per pixel of a per-rung figure (convergence); 0 otherwise
+
+
+@dataclass(frozen=True)
+class HarnessConfig:
+    """Keys every harness has; subclasses add theirs with a default and, where the type
+    alone does not say it, a range in the field's metadata (`min`, `choices`)."""
+
+    kind: str = "accuracy"
+    metrics: tuple[str, ...] = ()
+    dtype: str = field(default="float32", metadata={"choices": DTYPES})
+    folds: int = field(default=4, metadata={"min": 2})  # cross-validation folds of representations that train on a split
+    timeout_s: float | None = field(default=600.0, metadata={"min_exclusive": 0})  # per cell; run control, not hashed
+
+    #: Keys that control how a run goes, not what it measures: left out of the config hash.
+    RUN_CONTROL: ClassVar[tuple[str, ...]] = ("timeout_s",)
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            object.__setattr__(self, f.name, check_value(f"harness.{f.name}", getattr(self, f.name),
+                                                         _hints(type(self))[f.name], f.metadata))
+
+    def hashed(self) -> dict[str, Any]:
+        """The fields that decide what is measured (the config hash's share of the harness)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in self.RUN_CONTROL}
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> "HarnessConfig":
+        known = {f.name for f in dataclasses.fields(cls)}
+        for key in values:
+            if key not in known:
+                raise ConfigError(f"unknown config key harness.{key} for harness={values.get('kind', cls.kind)}; "
+                                  f"known: {', '.join(sorted(known))}")
+        return cls(**values)
+
+
+@dataclass(frozen=True)
+class HarnessContext:
+    """What a harness is built from, in the worker: the job's scene, data and options."""
+
+    scene: Any
+    metric_specs: list
+    seed: int
+    results_dir: Path
+    dataset_fingerprint: str
+    representation: str
+    representation_params: dict[str, Any]
+    scene_name: str
+    scene_params: dict[str, Any]
+
+
+class Harness(ABC):
+    """A measurement of fitted models; see the module docstring."""
+
+    name: ClassVar[str]
+    Config: ClassVar[type[HarnessConfig]] = HarnessConfig
+    scope: ClassVar[str] = "material"
+    #: Metric domains the harness accepts in `harness.metrics`.
+    domains: ClassVar[tuple[str, ...]] = ()
+    #: True: needs a rendered scene; False: needs scene=brdf_space.
+    rendered: ClassVar[bool] = False
+
+    @classmethod
+    def validate(cls, config: HarnessConfig, scene, metric_specs: list) -> None:
+        """Up-front checks of the config against the scene and metrics (no heavy work)."""
+        if scene.needs_rendering and not cls.rendered:
+            raise ConfigError(f"scene {scene.name!r} is rendered: use harness=render (image metrics) or scene=brdf_space")
+        if not scene.needs_rendering and cls.rendered:
+            raise ConfigError(f"harness={cls.name} needs a rendered scene (scene=sphere_directional, sphere_envmap, "
+                              f"spheres_on_plane); scene {scene.name!r} is not rendered")
+        for spec in metric_specs:
+            domain = getattr(spec.load(), "domain", None)
+            if domain not in cls.domains:
+                raise ConfigError(f"harness.metrics: {spec.name!r} is measured on {domain!r}, but a {cls.name} "
+                                  f"harness measures on {', '.join(cls.domains) or 'no metric domain'}")
+
+    @classmethod
+    def key(cls, config: HarnessConfig, scene_name: str, scene_params: dict[str, Any]) -> dict[str, Any]:
+        """The harness's share of the configuration hash."""
+        out: dict[str, Any] = {"harness": config.hashed()}
+        if cls.rendered:
+            out.update(scene=scene_name, scene_params=scene_params)
+        return out
+
+    @classmethod
+    def columns(cls, config: HarnessConfig, scene) -> dict[str, Any]:
+        """Typed store columns of this harness's rows (scene, sampler)."""
+        return {"scene": scene.name, "sampler": ""}
+
+    def __init__(self, config: HarnessConfig, context: HarnessContext):
+        self.config = config
+        self.context = context
+
+    @abstractmethod
+    def measure(self, model, material, label: str) -> list[Measurement]:
+        """Measurements of one fitted model on its material."""
+
+
+# --------------------------------------------------------------------------- typed values
+
+
+def _hints(cls) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def check_value(key: str, value: Any, hint: Any, rule: typing.Mapping[str, Any] = {}) -> Any:
+    """`value` converted to the type `hint` says, or a ConfigError naming the key and what it takes."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        (hint,) = [a for a in args if a is not type(None)]
+        origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{key}={value!r} must be true or false")
+    elif hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{key}={value!r} must be an integer{_range(rule)}")
+    elif hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{key}={value!r} must be a number{_range(rule)}")
+        value = float(value)
+        if value != value or value in (float("inf"), float("-inf")):
+            raise ConfigError(f"{key}={value!r} must be a finite number{_range(rule)}")
+    elif hint is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{key}={value!r} must be a string")
+    elif origin is tuple:
+        if isinstance(value, (str, bytes, dict)) or not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{key}={value!r} must be a list (e.g. {key}=[a,b])")
+        value = tuple(check_value(f"{key}[{i}]", v, args[0]) for i, v in enumerate(value))
+        return value
+    elif origin is dict or hint is dict:
+        if not isinstance(value, dict):
+            raise ConfigError(f"{key}={value!r} must be a mapping")
+        return dict(value)
+    if "choices" in rule and value not in rule["choices"]:
+        raise ConfigError(f"{key}={value!r} must be one of {', '.join(map(str, rule['choices']))}")
+    if "min" in rule and value < rule["min"]:
+        raise ConfigError(f"{key}={value!r} must be ≥ {rule['min']}")
+    if "min_exclusive" in rule and value <= rule["min_exclusive"]:
+        raise ConfigError(f"{key}={value!r} must be > {rule['min_exclusive']}")
+    return value
+
+
+def _range(rule: typing.Mapping[str, Any]) -> str:
+    if "min" in rule:
+        return f" ≥ {rule['min']}"
+    if "min_exclusive" in rule:
+        return f" > {rule['min_exclusive']}"
+    return ""

@@ -25,6 +25,7 @@ import copy
 import hashlib
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -33,15 +34,11 @@ import torch
 from ..errors import ConfigError
 from ..protocol import Material, Representation
 from ..provenance import config_hash
-from . import Measurement
-from .render import cached_render
+from . import Harness, HarnessContext, Measurement
+from .render import MONTE_CARLO, RenderConfig, cached_render, check_simulation
 
-#: Simulators whose renders carry Monte Carlo noise (the closed form is noise-free).
-MONTE_CARLO = ("direct_mis", "path")
 #: ε of the relative MSE (p − r)² / (r² + ε), as in denoising work (Rousselle et al. 2011).
 RELMSE_EPS = 1e-2
-#: The store's `scene` column of a convergence row: "<scene>/convergence/<sampler>[(params)]".
-LABEL_INFIX = "/convergence/"
 
 
 # --------------------------------------------------------------------------- configuration
@@ -79,15 +76,10 @@ def check_config(harness, scene) -> None:
     check_ladder(harness.spp_ladder, harness.reference_spp)
 
 
-def scene_label(scene: str, sampler: str, sampler_params: dict[str, Any] | None = None) -> str:
-    """The store's scene column for convergence rows, so samplers (and their parameters) stay apart."""
+def sampler_label(sampler: str, sampler_params: dict[str, Any] | None = None) -> str:
+    """The store's sampler column, so samplers and their parameters stay apart: `ggx(alpha=0.2)`."""
     params = ",".join(f"{k}={v}" for k, v in sorted((sampler_params or {}).items()))
-    return f"{scene}{LABEL_INFIX}{sampler}" + (f"({params})" if params else "")
-
-
-def rung_metric(metric: str, spp: int) -> str:
-    """Store name of a per-rung metric, e.g. `rmse_hdr@spp=4`."""
-    return f"{metric}@spp={spp}"
+    return sampler + (f"({params})" if params else "")
 
 
 def derive_seed(seed: int, tag: str) -> int:
@@ -101,9 +93,12 @@ def derive_seed(seed: int, tag: str) -> int:
 
 
 def rmse_hdr(image: torch.Tensor, reference: torch.Tensor) -> float:
-    from brdfbench_metrics.image_functional import rmse
+    """RMSE of HDR radiance, by the registered `rmse_hdr` metric (the core names no metric module)."""
+    from .. import registry
 
-    return float(rmse(image, reference, space="hdr"))
+    metric = registry.get("metrics", "rmse_hdr").load()()
+    metric.update(image, reference)
+    return float(metric.compute())
 
 
 def relative_mse(image: torch.Tensor, reference: torch.Tensor, eps: float = RELMSE_EPS) -> float:
@@ -197,12 +192,65 @@ class ConvergenceHarness:
             seconds = time.perf_counter() - t0
             errors.append(rmse_hdr(image, reference))
             out += [
-                Measurement(rung_metric("rmse_hdr", n), errors[-1], "radiance", False),
-                Measurement(rung_metric("relmse_hdr", n), relative_mse(image, reference), "1", False),
-                Measurement(rung_metric("render_time", n), seconds, "s", False),
+                Measurement("rmse_hdr", errors[-1], "radiance", False, spp=n),
+                Measurement("relmse_hdr", relative_mse(image, reference), "1", False, spp=n),
+                Measurement("render_time", seconds, "s", False, spp=n),
             ]
         slope, at_one = fit_slope(self.ladder, errors)
         if math.isfinite(slope):
             out += [Measurement("convergence_slope", slope, "1", False),
                     Measurement("convergence_rmse_1spp", at_one, "radiance", False)]
         return out
+
+
+# --------------------------------------------------------------------------- the harness plugin
+
+
+@dataclass(frozen=True)
+class ConvergenceConfig(RenderConfig):
+    kind: str = "convergence"
+    metrics: tuple[str, ...] = ()  # must stay empty: the per-rung errors are fixed
+    spp_ladder: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)  # spp of the rungs, strictly increasing
+    reference_spp: int = 1024  # spp of the model's own reference render; above the ladder
+
+
+class ConvergenceHarnessPlugin(Harness):
+    """Error against spp (`harness=convergence`): see `ConvergenceHarness`."""
+
+    name = "convergence"
+    Config = ConvergenceConfig
+    rendered = True
+
+    @classmethod
+    def validate(cls, config, scene, metric_specs) -> None:
+        if not scene.needs_rendering:
+            super().validate(config, scene, metric_specs)
+        check_config(config, scene)
+        check_simulation(config, scene)
+
+    @classmethod
+    def columns(cls, config, scene) -> dict[str, Any]:
+        return {"scene": scene.name, "sampler": sampler_label(config.sampler, config.sampler_params)}
+
+    def __init__(self, config: ConvergenceConfig, context: HarnessContext):
+        super().__init__(config, context)
+        from ..render.simulate import build_simulator
+
+        c = config
+
+        def build(spp: int):
+            return build_simulator(context.scene, name=c.simulator, sampler=c.sampler, sampler_params=c.sampler_params,
+                                   spp=spp, dtype=getattr(torch, c.dtype), backend=c.backend)
+
+        self.harness = ConvergenceHarness(
+            build, c.spp_ladder, c.reference_spp,
+            out_dir=context.results_dir / "renders" / context.scene.name / "convergence",
+            dataset_fingerprint=context.dataset_fingerprint, seed=context.seed, exposure=c.exposure,
+            save_images=c.save_images,
+            key={"scene": context.scene_name, "scene_params": context.scene_params, "sampler": c.sampler,
+                 "sampler_params": c.sampler_params, "dtype": c.dtype, "representation": context.representation,
+                 "params": context.representation_params},
+        )
+
+    def measure(self, model, material, label: str) -> list[Measurement]:
+        return self.harness.measure(model, material, label)

@@ -1,7 +1,9 @@
 """What a representation costs: evaluation throughput and model size.
 
-Throughput is the median over repeated timed batches after one warm-up batch, measured
-on this machine's CPU with torch's current thread count.
+Throughput is the median over timed batches after one warm-up batch, measured on this
+machine's CPU with torch's current thread count: at least three batches, then more until
+`min_time_s` has passed or `max_repeats` were timed. Every cell pays that time, so
+`min_time_s` is kept short; the median of three or more is robust to a stray slow batch.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from . import Measurement, directions
 
 
 def evaluation_throughput(
-    model: Representation, *, batch: int = 2**16, min_time_s: float = 0.3, max_repeats: int = 20,
+    model: Representation, *, batch: int = 2**16, min_time_s: float = 0.1, max_repeats: int = 20,
     seed: int = 0, dtype: torch.dtype = torch.float32,
 ) -> Measurement:
     wi, wo = (t.to(dtype) for t in directions.random_pairs(batch, seed + 1, torch.float64))

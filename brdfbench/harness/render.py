@@ -14,17 +14,18 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
 import torch
 
 from .. import images
-from ..errors import DataError
+from ..errors import ConfigError, DataError
 from ..protocol import Material, Representation
 from ..provenance import config_hash
 from ..specs import MetricSpec
-from . import Measurement
+from . import Harness, HarnessConfig, HarnessContext, Measurement
 
 log = logging.getLogger(__name__)
 
@@ -112,3 +113,76 @@ def cached_render(exr: Path, render: Callable[[], torch.Tensor], *, exposure: fl
     save_image(exr, image, exposure=exposure, png=png)
     return image
 
+
+
+# --------------------------------------------------------------------------- the harness plugin
+
+#: Simulators whose renders carry Monte Carlo noise (the closed form is noise-free).
+MONTE_CARLO = ("direct_mis", "path")
+
+
+@dataclass(frozen=True)
+class RenderConfig(HarnessConfig):
+    kind: str = "render"
+    metrics: tuple[str, ...] = ("psnr_ldr", "ssim_ldr", "flip_ldr", "rmse_hdr")
+    timeout_s: float | None = field(default=1800.0, metadata={"min_exclusive": 0})
+    simulator: str | None = None  # None: the cheapest exact one for the scene
+    backend: str | None = field(default=None, metadata={"choices": ("mitsuba", "torch")})  # None: mitsuba where LLVM >= 19 loads
+    sampler: str = "cosine"  # BRDF importance sampler of Monte Carlo simulators
+    sampler_params: dict[str, Any] = field(default_factory=dict)
+    spp: int | None = field(default=None, metadata={"min": 1})  # samples per pixel; None: the scene's
+    exposure: float = 0.0  # stops, for tone-mapped (LDR) metrics and PNGs
+    save_images: bool = True
+
+
+def check_simulation(config, scene) -> None:
+    """Light up-front checks of the simulator, backend and sampler a rendered harness asks for."""
+    from .. import registry
+
+    chosen = config.simulator or scene.simulator()
+    if chosen not in scene.allowed_simulators():
+        raise ConfigError(f"harness.simulator={chosen!r} cannot render scene {scene.name!r} exactly; "
+                          f"it allows {', '.join(scene.allowed_simulators())}")
+    spec = registry.get("samplers", config.sampler)
+    try:
+        spec.create(**config.sampler_params)
+    except TypeError as exc:
+        raise ConfigError(f"harness.sampler_params={config.sampler_params!r} for sampler {config.sampler!r}: {exc}") from None
+
+
+class ImageHarness(Harness):
+    """Image-space accuracy (`harness=render`): see `RenderHarness`."""
+
+    name = "render"
+    Config = RenderConfig
+    domains = ("image",)
+    rendered = True
+
+    @classmethod
+    def validate(cls, config, scene, metric_specs) -> None:
+        super().validate(config, scene, metric_specs)
+        check_simulation(config, scene)
+
+    @classmethod
+    def columns(cls, config, scene) -> dict[str, Any]:
+        chosen = config.simulator or scene.simulator()
+        return {"scene": scene.name, "sampler": config.sampler if chosen in MONTE_CARLO else ""}
+
+    def __init__(self, config: RenderConfig, context: HarnessContext):
+        super().__init__(config, context)
+        from ..render.simulate import build_simulator
+
+        c = config
+        simulator = build_simulator(context.scene, name=c.simulator, sampler=c.sampler, sampler_params=c.sampler_params,
+                                    spp=c.spp, dtype=getattr(torch, c.dtype), backend=c.backend)
+        self.harness = RenderHarness(
+            simulator, context.metric_specs, out_dir=context.results_dir / "renders" / context.scene.name,
+            dataset_fingerprint=context.dataset_fingerprint, seed=context.seed, exposure=c.exposure,
+            save_images=c.save_images,
+            key={"scene": context.scene_name, "scene_params": context.scene_params, "simulator": simulator.name,
+                 "backend": simulator.backend, "sampler": c.sampler, "sampler_params": c.sampler_params, "spp": c.spp,
+                 "dtype": c.dtype},
+        )
+
+    def measure(self, model, material, label: str) -> list[Measurement]:
+        return self.harness.measure(model, material, label)

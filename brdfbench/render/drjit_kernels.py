@@ -5,31 +5,31 @@ unit directions `mi.Vector3f` in the protocol's convention (z = normal, ωi towa
 light, ωo toward the viewer), with drjit operations only. Mitsuba then traces it into its
 own symbolic kernels: no torch call, no host round trip, no per-bounce kernel launch.
 
-`kernel_for(model)` looks, in order, for
+`kernel_for(model)` calls the model's `drjit_kernel()` method, the one hook for every
+representation, built-in or third-party. It returns a Kernel (any object with `name` and
+`eval(wi, wo) -> mi.Color3f`) or None to decline; a model without the hook, or declining,
+is evaluated by the adapter in torch (evaluated mode, see mitsuba_bsdf.py). Rules for a
+hook's kernel:
+- drjit operations on `mi.*` types of the current variant only (no numpy, torch or
+  Python branching on values), so it traces in symbolic mode;
+- per-material data (weights, tables, coefficients) lives in drjit arrays made at
+  construction (`dr.opaque(mi.Float, x)` scalars, `mi.Float(array)` read with
+  `dr.gather`), never Python float literals: literals are baked into the kernel's code,
+  so every material would compile its own kernel;
+- only lanes with both directions strictly above the horizon matter; the adapter zeroes
+  the others and counts (and zeroes) non-finite values itself;
+- an array read by packet gathers (`dr.gather(mi.Vector4f, ...)`) must start on an
+  aligned address (`aligned_zeros`), or drjit silently splits the packet, and the kernel
+  then depends on where numpy's allocator put the array;
+- the hook imports drjit and mitsuba inside itself, so that importing the representation
+  imports neither.
 
-(a) a method `drjit_kernel()` on the model: the hook for third-party representations. It
-    returns a Kernel (any object with `name` and `eval(wi, wo) -> mi.Color3f`) or None to
-    decline. Rules for a hook's kernel:
-    - drjit operations on `mi.*` types of the current variant only (no numpy, torch or
-      Python branching on values), so it traces in symbolic mode;
-    - per-material data (weights, tables, coefficients) lives in drjit arrays made at
-      construction (`dr.opaque(mi.Float, x)` scalars, `mi.Float(array)` read with
-      `dr.gather`), never Python float literals: literals are baked into the kernel's
-      code, so every material would compile its own kernel;
-    - only lanes with both directions strictly above the horizon matter; the adapter
-      zeroes the others and counts (and zeroes) non-finite values itself;
-    - an array read by packet gathers (`dr.gather(mi.Vector4f, ...)`) must start on an
-      aligned address (`aligned_zeros`), or drjit silently splits the packet, and the
-      kernel then depends on where numpy's allocator put the array.
-(b) a built-in twin, matched by exact class (a subclass may change `_eval`): the MERL
-    table (nearest cell, also downsampled, or trilinear) and PCA (a reconstructed MERL
-    table) as table gathers, lambert, blinn_phong, cook_torrance, ggx, nbrdf and naive_mlp;
-(c) None: the adapter evaluates the model in torch (evaluated mode, see mitsuba_bsdf.py).
-
-Kernels are used in JIT variants (llvm_*, cuda_*) only; scalar variants take the torch
-path. The twins follow the torch code operation by operation (same clamps, same order of
-the per-material constants, computed on the host with the same torch ops), so they agree
-to fp32 rounding.
+This module holds what any kernel may build on: the math helpers below (twins of
+brdfbench.coords, in the same operations, so a kernel agrees with torch to fp32 rounding),
+the MERL cell lookup and the table kernels (`MerlTableKernel`, `MerlTrilinearKernel`,
+`table_kernel`). The built-in representations' own kernels live with them, in their
+plugin package, as a third party's would. Kernels are used in JIT variants (llvm_*,
+cuda_*) only; scalar variants take the torch path.
 
 MERL tables are looked up in the reference's cells. `merl_cell` finds them in fp32 (no
 division but three in its arctangents, scale-invariant forms that need no normalisation)
@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 import weakref
-from typing import Any, Callable
+from typing import Any
 
 import drjit as dr
 import mitsuba as mi
@@ -56,7 +56,6 @@ import numpy as np
 import torch
 
 from .. import merl
-from ..data.nbrdf_h5 import MAX_LOG_VALUE  # the neural outputs' pre-exponential clamp
 
 INV_PI = 1.0 / math.pi
 TWO_PI = 2.0 * math.pi
@@ -100,11 +99,12 @@ def aligned_zeros(shape: tuple[int, ...], align: int = 64) -> np.ndarray:
     return raw[start:start + count * 4].view(np.float32).reshape(shape)
 
 
-def _fp32(t: torch.Tensor) -> list[float]:
+def fp32_values(t: torch.Tensor) -> list[float]:
+    """A tensor's values rounded to fp32, as Python floats (for `opaque`)."""
     return [float(x) for x in t.to(torch.float32).reshape(-1)]
 
 
-def _safe(x):
+def safe_divisor(x):
     """x where positive, else 1: a divisor that leaves zero vectors at zero."""
     return dr.select(x > 0, x, 1.0)
 
@@ -146,10 +146,10 @@ def half_vector(wi, wo):
     s = wi + wo
     diff = wi - wo
     opposite = _dot(diff, diff) > _dot(s, s)
-    s = div(s, _safe(_max_abs(s)))
+    s = div(s, safe_divisor(_max_abs(s)))
     v = dr.select(opposite, _cross(diff, _cross(s, diff)), s)
-    v = div(v, _safe(_max_abs(v)))
-    return div(v, _safe(dr.norm(v)))  # dr.norm rounds as torch's vector_norm
+    v = div(v, safe_divisor(_max_abs(v)))
+    return div(v, safe_divisor(dr.norm(v)))  # dr.norm rounds as torch's vector_norm
 
 
 def to_half_frame(wi, h, rho=None):
@@ -413,238 +413,19 @@ def table_kernel(values: np.ndarray, downsample: int = 1, name: str = "merl_tabl
     return kernel
 
 
-def _merl_kernel(model) -> Kernel | None:
-    if model.mode == "trilinear":
-        return None if model.table is None else table_kernel(model.table.values, name="merl_trilinear",
-                                                              cls=MerlTrilinearKernel)
-    if model.downsample == 1:
-        if model.table is None:
-            return None
-        return table_kernel(model.table.values, name="merl")
-    if model.samples is None:
-        return None
-    scales = np.asarray(merl.CHANNEL_SCALES).reshape(3, 1, 1, 1)
-    return MerlTableKernel(model.samples * scales, model.downsample, name=f"merl_downsample{model.downsample}")
-
-
-def _pca_kernel(model) -> Kernel | None:
-    if model.coefficients is None:
-        return None
-    return MerlTableKernel(model.table.values, name="pca")
-
-
-# --------------------------------------------------------------------------- analytic
-
-
-class LambertKernel(Kernel):
-    name = "lambert"
-
-    def __init__(self, model):
-        self.rho_pi = opaque(_fp32(model.albedo / math.pi))
-
-    def eval(self, wi, wo):
-        return mi.Color3f(*self.rho_pi)
-
-
-class _Geometry:
-    """Twin of representations/analytic.py `geometry` (fp32, same clamps)."""
-
-    COS_MIN = 1e-7
-
-    def __init__(self, wi, wo):
-        h = half_vector(wi, wo)
-        hz = dr.maximum(h.z, 0.0)
-        s = wi + wo
-        self.cos_i = dr.clip(wi.z, self.COS_MIN, 1.0)
-        self.cos_o = dr.clip(wo.z, self.COS_MIN, 1.0)
-        self.sin2_i = dr.clip(wi.x * wi.x + wi.y * wi.y, 0.0, 1.0)
-        self.sin2_o = dr.clip(wo.x * wo.x + wo.y * wo.y, 0.0, 1.0)
-        self.cos2_h = hz * hz
-        self.sin2_h = dr.clip(h.x * h.x + h.y * h.y, 0.0, 1.0)
-        self.cos_d = dr.clip(0.5 * dr.norm(s), 0.0, 1.0)
-
-
-def _ggx_ndf(a2, g: _Geometry):
-    q = a2 * g.cos2_h + g.sin2_h
-    return a2 / (math.pi * q * q)
-
-
-def _schlick_fresnel(f0, one_minus_f0, cos_d):
-    m = 1.0 - cos_d
-    m2 = m * m
-    return f0 + one_minus_f0 * (m2 * m2 * m)
-
-
-class AnalyticKernel(Kernel):
-    """k_d/π + k_s · lobe, clamped to [0, fp32 max]; subclasses define `lobe`."""
-
-    def __init__(self, model):
-        c = {k: v.to(torch.float32) for k, v in model.coeffs.items()}
-        self.kd_pi = opaque(_fp32(c["kd"] * INV_PI))
-        self.ks = opaque(_fp32(c["ks"]))
-        self.shape = {k: opaque(_fp32(v))[0] for k, v in self.constants({k: v[0] for k, v in c.items()}).items()}
-
-    @staticmethod
-    def constants(c: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-        """Per-material scalars of the lobe, in fp32 torch ops as analytic.py forms them."""
-        raise NotImplementedError
-
-    def lobe(self, g: _Geometry):
-        raise NotImplementedError
-
-    def eval(self, wi, wo):
-        lobe = self.lobe(_Geometry(wi, wo))
-        out = [kd + lobe * ks for kd, ks in zip(self.kd_pi, self.ks)]
-        return mi.Color3f(*(dr.clip(v, 0.0, FLOAT32_MAX) for v in out))
-
-
-class CookTorranceKernel(AnalyticKernel):
-    name = "cook_torrance"
-
-    @staticmethod
-    def constants(c):
-        alpha = (c["roughness"] * c["roughness"]).clamp(min=1e-6)
-        k = 0.5 * alpha * alpha
-        r = (c["ior"] - 1.0) / (c["ior"] + 1.0)
-        f0 = r * r
-        return {"a2": alpha * alpha, "k": k, "one_minus_k": 1.0 - k, "f0": f0, "one_minus_f0": 1.0 - f0}
-
-    def lobe(self, g):
-        p = self.shape
-        k, one_minus_k = p["k"], p["one_minus_k"]
-        geometric = 0.25 / ((g.cos_i * one_minus_k + k) * (g.cos_o * one_minus_k + k))
-        return _ggx_ndf(p["a2"], g) * geometric * _schlick_fresnel(p["f0"], p["one_minus_f0"], g.cos_d)
-
-
-class GGXKernel(AnalyticKernel):
-    name = "ggx"
-
-    @staticmethod
-    def constants(c):
-        alpha = c["alpha"].clamp(min=1e-6)
-        return {"a2": alpha * alpha, "f0": c["f0"], "one_minus_f0": 1.0 - c["f0"]}
-
-    def lobe(self, g):
-        p = self.shape
-        a2 = p["a2"]
-        ai = dr.sqrt(g.cos_i * g.cos_i + a2 * g.sin2_i)
-        ao = dr.sqrt(g.cos_o * g.cos_o + a2 * g.sin2_o)
-        smith = 0.5 / (g.cos_o * ai + g.cos_i * ao)
-        return _ggx_ndf(a2, g) * smith * _schlick_fresnel(p["f0"], p["one_minus_f0"], g.cos_d)
-
-
-class BlinnPhongKernel(AnalyticKernel):
-    name = "blinn_phong"
-
-    @staticmethod
-    def constants(c):
-        n = c["exponent"].clamp(min=0.0)
-        return {"n": n, "norm": (n + 8.0) / (8.0 * math.pi)}
-
-    def lobe(self, g):
-        p = self.shape
-        log_cos = 0.5 * log1p(-dr.minimum(g.sin2_h, 1.0 - FLOAT32_EPS))
-        lobe = p["norm"] * dr.exp(p["n"] * log_cos)
-        return dr.select(g.cos2_h > 0, lobe, 0.0)
-
-
-# --------------------------------------------------------------------------- neural
-
-
-class MLPKernel(Kernel):
-    """The NBRDF / naive MLP (representations/mlp.py): dense layers with ReLU, then
-    expm1(min(z, 80)) clamped at 0, times the channel scales.
-
-    Every weight is an opaque scalar, so materials of one architecture share one compiled
-    kernel. The price: inside Mitsuba's BSDF call, per-instance inputs are read from the
-    call's data with a packet gather per 8 values, which halves the throughput of weights
-    baked in as literals (measured on the 256² sphere), which would compile per material.
-    """
-
-    def __init__(self, model):
-        self.name = model.plugin_name
-        self.features = model.features
-        weights = model.weights
-        n_layers = sum(1 for k in weights if k.startswith("W"))
-        self.layers = []
-        for i in range(1, n_layers + 1):
-            w = weights[f"W{i}"].to(torch.float32).numpy()
-            b = weights[f"b{i}"].to(torch.float32).numpy()
-            flat = opaque(w)
-            cols = [[flat[r * w.shape[1] + c] for r in range(w.shape[0])] for c in range(w.shape[1])]
-            self.layers.append((cols, opaque(b)))
-        self.scale = opaque(model.output_scale.to(torch.float32).numpy())
-
-    def inputs(self, wi, wo) -> list:
-        if self.features == "directions":
-            return [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z]
-        # Rusinkiewicz (sin θh, 0, cos θh, d): the unit h and the unit ωi in h's frame are
-        # these very sines and cosines, without the angles' atan2 / sin / cos round trip.
-        h = half_vector(wi, wo)
-        rho_h = dr.hypot(h.x, h.y)
-        d = to_half_frame(wi, h, rho_h)
-        d = div(d, _safe(dr.norm(d)))
-        return [rho_h, None, h.z, d.x, d.y, d.z]
-
-    def eval(self, wi, wo):
-        x = self.inputs(wi, wo)
-        for layer, (cols, bias) in enumerate(self.layers):
-            out = []
-            for col, b in zip(cols, bias):
-                acc = b
-                for xi, w in zip(x, col):
-                    if xi is not None:  # the constant 0 input of the Rusinkiewicz encoding
-                        acc = dr.fma(xi, w, acc)
-                out.append(acc)
-            last = layer == len(self.layers) - 1
-            x = out if last else [dr.maximum(v, 0.0) for v in out]
-        values = []
-        for z, scale in zip(x, self.scale):
-            z = dr.minimum(z, MAX_LOG_VALUE)
-            values.append(dr.select(z > 0, expm1(z), 0.0) * scale)
-        return mi.Color3f(*values)
-
-
-def _mlp_kernel(model) -> Kernel | None:
-    if model.weights is None or len(model.output_scale.reshape(-1)) != 3:
-        return None
-    return MLPKernel(model)
-
-
 # --------------------------------------------------------------------------- lookup
-
-_R = "brdfbench_representations"
-#: Built-in twins by exact class ("module:qualname"): names only, so nothing is imported here.
-BUILTIN: dict[str, Callable[[Any], Kernel | None]] = {
-    f"{_R}.merl:TabulatedMERL": _merl_kernel,
-    f"{_R}.pca:PCA": _pca_kernel,
-    f"{_R}.lambert:Lambert": LambertKernel,
-    f"{_R}.analytic:CookTorrance": CookTorranceKernel,
-    f"{_R}.analytic:GGX": GGXKernel,
-    f"{_R}.analytic:BlinnPhong": BlinnPhongKernel,
-    f"{_R}.nbrdf:NBRDF": _mlp_kernel,
-    f"{_R}.nbrdf:NaiveMLP": _mlp_kernel,
-}
-
-
-def class_key(obj: Any) -> str:
-    cls = type(obj)
-    return f"{cls.__module__}:{cls.__qualname__}"
 
 
 def kernel_for(model) -> Kernel | None:
-    """The drjit kernel of a model: its `drjit_kernel()` hook, else a built-in twin, else None
-    (the torch path). Always None in scalar variants, which take the torch path."""
-    return native_twin(model, "drjit_kernel", BUILTIN)
+    """The drjit kernel of a model: what its `drjit_kernel()` hook returns, else None (the
+    torch path). Always None in scalar variants, which take the torch path."""
+    return native_hook(model, "drjit_kernel")
 
 
-def native_twin(obj, hook_name: str, builtin: dict[str, Callable]):
-    """`obj.<hook_name>()` where the object has that hook, else the builder registered for
-    its exact class in `builtin`, else None; always None in scalar variants."""
+def native_hook(obj, hook_name: str):
+    """`obj.<hook_name>()` where the object has that hook, else None; always None in
+    scalar variants."""
     if not dr.is_jit_v(mi.Float):
         return None
     hook = getattr(obj, hook_name, None)
-    if callable(hook):
-        return hook()
-    builder = builtin.get(class_key(obj))
-    return builder(obj) if builder is not None else None
+    return hook() if callable(hook) else None

@@ -6,22 +6,22 @@ horizon), in drjit operations only, so it traces into Mitsuba's symbolic kernels
 formulas follow the torch samplers operation by operation (same stable forms, clamps and
 constants), so both agree to fp32 rounding.
 
-`sampler_for(sampler)` returns the sampler's own `drjit_sampler()` (the hook for third
-parties: same rules as a representation's `drjit_kernel()`, see drjit_kernels.py), else
-the built-in twin of its exact class, else None: the adapter then calls the torch sampler
-in evaluated mode. Always None in scalar variants.
+`sampler_for(sampler)` returns what the sampler's `drjit_sampler()` hook returns (the one
+hook for built-in and third-party samplers alike: same rules as a representation's
+`drjit_kernel()`, see drjit_kernels.py); the built-ins' hooks build the twins below. A
+sampler without the hook, or declining with None, runs in torch, the adapter then
+rendering in evaluated mode. Always None in scalar variants.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .drjit_kernels import FLOAT32_MAX, div, expm1, log1p, native_twin
+from .drjit_kernels import FLOAT32_MAX, div, expm1, log1p, native_hook
 
 INV_PI = 1.0 / math.pi
 INV_2PI = 1.0 / (2.0 * math.pi)
@@ -274,20 +274,7 @@ class GGXVisibleTwin(DrSampler):
         return _finite_max(self.d_norm / (q * q) / (2.0 * lam))
 
 
-_B = "brdfbench.sampling.builtin"
-#: Twins by exact sampler class ("module:qualname").
-BUILTIN: dict[str, Callable[[Any], DrSampler]] = {
-    f"{_B}:Uniform": UniformTwin,
-    f"{_B}:Cosine": CosineTwin,
-    f"{_B}:PowerCosine": PowerCosineTwin,
-    f"{_B}:BlinnPhong": BlinnPhongTwin,
-    f"{_B}:Beckmann": BeckmannTwin,
-    f"{_B}:GGX": GGXTwin,
-    f"{_B}:GGXVisible": GGXVisibleTwin,
-}
-
-
 def sampler_for(sampler) -> DrSampler | None:
-    """The drjit twin of a sampler: its `drjit_sampler()` hook, else a built-in twin, else
-    None (the torch path). Always None in scalar variants."""
-    return native_twin(sampler, "drjit_sampler", BUILTIN)
+    """The drjit twin of a sampler: what its `drjit_sampler()` hook returns (the built-ins
+    return the twins above), else None (the torch path). Always None in scalar variants."""
+    return native_hook(sampler, "drjit_sampler")

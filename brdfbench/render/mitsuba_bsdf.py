@@ -517,7 +517,7 @@ def sphere_scene(bsdf: dict, *, resolution: int = 256, spp: int = 16, max_depth:
     from .camera import Camera
 
     if integrator == "direct_mis":
-        from .mitsuba_sim import DIRECT_MIS_INTEGRATOR, register_integrators
+        from .mitsuba_integrators import DIRECT_MIS_INTEGRATOR, register_integrators
 
         register_integrators()
         integrator_dict: dict[str, Any] = {"type": DIRECT_MIS_INTEGRATOR}

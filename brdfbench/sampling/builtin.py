@@ -107,6 +107,13 @@ class Uniform(_Hemisphere):
     def _pdf(self, wi, wo):
         return torch.full((wo.shape[0],), INV_2PI, dtype=wo.dtype)
 
+    def drjit_sampler(self):
+        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
+        may change `sample` or `pdf`."""
+        from ..render.drjit_samplers import UniformTwin
+
+        return UniformTwin(self) if type(self) is Uniform else None
+
 
 class Cosine(_Hemisphere):
     """Cosine-weighted hemisphere sampling: pdf(ωo) = cos θo / π, cos θ = √(1 − u₁).
@@ -126,6 +133,13 @@ class Cosine(_Hemisphere):
 
     def _pdf(self, wi, wo):
         return wo[:, 2] * INV_PI
+
+    def drjit_sampler(self):
+        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
+        may change `sample` or `pdf`."""
+        from ..render.drjit_samplers import CosineTwin
+
+        return CosineTwin(self) if type(self) is Cosine else None
 
 
 class PowerCosine(_Hemisphere):
@@ -156,6 +170,13 @@ class PowerCosine(_Hemisphere):
     def _pdf(self, wi, wo):
         n = self._n
         return _finite_max((n + 1.0) * INV_2PI * torch.exp(n * log_cos_theta(wo)))
+
+    def drjit_sampler(self):
+        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
+        may change `sample` or `pdf`."""
+        from ..render.drjit_samplers import PowerCosineTwin
+
+        return PowerCosineTwin(self) if type(self) is PowerCosine else None
 
 
 # --------------------------------------------------------------------------- microfacet
@@ -229,6 +250,13 @@ class BlinnPhong(_Microfacet):
         n = self._n
         return (n + 2.0) * INV_2PI * torch.exp((n + 1.0) * log_cos_theta(h))
 
+    def drjit_sampler(self):
+        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
+        may change `sample` or `pdf`."""
+        from ..render.drjit_samplers import BlinnPhongTwin
+
+        return BlinnPhongTwin(self) if type(self) is BlinnPhong else None
+
 
 class Beckmann(_Microfacet):
     """Beckmann microfacet sampling: D(h) = exp(−tan²θh/α²) / (π α² cos⁴θh),
@@ -264,6 +292,13 @@ class Beckmann(_Microfacet):
         value = torch.exp(log_value) * (INV_PI / self._a2)
         return torch.where(ok, value, torch.zeros_like(value))
 
+    def drjit_sampler(self):
+        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
+        may change `sample` or `pdf`."""
+        from ..render.drjit_samplers import BeckmannTwin
+
+        return BeckmannTwin(self) if type(self) is Beckmann else None
+
 
 class GGX(_Microfacet):
     """GGX (Trowbridge-Reitz) microfacet sampling: D(h) = α² / (π cos⁴θh (α² + tan²θh)²),
@@ -293,6 +328,13 @@ class GGX(_Microfacet):
 
     def _d_cos(self, h):
         return _ggx_d(self._a2, h) * h[:, 2]
+
+    def drjit_sampler(self):
+        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
+        may change `sample` or `pdf`."""
+        from ..render.drjit_samplers import GGXTwin
+
+        return GGXTwin(self) if type(self) is GGX else None
 
 
 def _ggx_d(a2: float, h: Tensor) -> Tensor:
@@ -376,3 +418,10 @@ class GGXVisible(Sampler):
         cos_i = wi[:, 2]
         lam = cos_i + torch.sqrt(cos_i * cos_i + a2 * sin2_theta(wi))
         return _finite_max(_ggx_d(a2, h) / (2.0 * lam))
+
+    def drjit_sampler(self):
+        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
+        may change `sample` or `pdf`."""
+        from ..render.drjit_samplers import GGXVisibleTwin
+
+        return GGXVisibleTwin(self) if type(self) is GGXVisible else None

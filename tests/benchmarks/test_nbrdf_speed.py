@@ -19,7 +19,7 @@ import torch
 
 from brdfbench.data.nbrdf_release import find_release_dir, nbrdf_release_dataset
 from brdfbench.data.synthetic import synthetic_dataset
-from brdfbench_representations import mlp
+from brdfbench.nbrdf import network as nw
 from brdfbench_representations.nbrdf import NBRDF
 from brdfbench_representations.nbrdf_fit import REFERENCE_RECIPE, Recipe, draw_samples, fit_batched
 
@@ -28,7 +28,7 @@ FULL_MATERIALS = 16
 
 
 def _inits(n, hidden=(21, 21)):
-    return [mlp.glorot_init(hidden, torch.Generator().manual_seed(i)) for i in range(n)]
+    return [nw.glorot_init(hidden, torch.Generator().manual_seed(i)) for i in range(n)]
 
 
 def _fit(tables, recipe, batched, samples):
@@ -95,5 +95,5 @@ def test_fit_one_material_by_recipe(benchmark, full_targets, recipe_name):
     outcomes = benchmark.pedantic(lambda: fit_batched([target.table], [init], recipe=recipe, samples=samples),
                                   rounds=1, iterations=1)
     _record(benchmark, outcomes, 1)
-    z = mlp.last_layer(outcomes[0].weights, samples.x)
+    z = nw.last_layer(outcomes[0].weights, samples.x)
     benchmark.extra_info.update(material=target.name, zero_output_fraction=(z <= 0).float().mean(dim=0).tolist())

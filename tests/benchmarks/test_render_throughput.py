@@ -55,7 +55,7 @@ def mb():
 def bsdfs(mb) -> dict[str, dict]:
     """Mitsuba's rough conductor, and adapters of models of the reference material (the
     MLPs with Glorot weights: their cost does not depend on the values)."""
-    from brdfbench_representations import mlp
+    from brdfbench.nbrdf import network as nw
 
     out = {"roughconductor": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2}}
     for name in CASES[1:]:
@@ -63,7 +63,7 @@ def bsdfs(mb) -> dict[str, dict]:
         spec = registry.get("representations", rep)
         if name in ("nbrdf", "naive_mlp"):
             model = spec.create()
-            model.weights = mlp.glorot_init(model.hidden, torch.Generator().manual_seed(0))
+            model.weights = nw.glorot_init(model.hidden, torch.Generator().manual_seed(0))
         elif name == "merl_trilinear":
             model = spec.create(mode="trilinear").fit(reference_material())
         elif name in ("merl", "lambert"):

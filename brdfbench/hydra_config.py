@@ -1,0 +1,104 @@
+"""Composed Hydra configs → typed jobs (`to_run_config`), and the per-job summary file a
+sweep's end reads (`brdfbench_job.json` in the job's Hydra output folder)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from .errors import ConfigError
+from .runner import RunConfig, harness_config
+
+JOB_SUMMARY = "brdfbench_job.json"
+#: Top-level keys of config.yaml besides the groups; anything else is a typo.
+TOP_LEVEL = {"representation", "dataset", "harness", "scene", "seed", "materials", "limit", "results_dir", "save_models",
+             "isolate", "progress"}
+
+
+def _section(cfg: DictConfig, key: str) -> dict:
+    node = OmegaConf.select(cfg, key, throw_on_missing=False)
+    if node is None:
+        return {}
+    try:
+        value = OmegaConf.to_container(node, resolve=True, throw_on_missing=True)
+    except Exception as exc:  # omegaconf's MissingMandatoryValue and interpolation errors name the key
+        raise ConfigError(f"config key {key}: {exc}".splitlines()[0]) from None
+    if not isinstance(value, dict):
+        raise ConfigError(f"config key {key}={value!r} must be a config group (a mapping)")
+    return value
+
+
+def _value(cfg: DictConfig, key: str, default: Any = None) -> Any:
+    try:
+        node = OmegaConf.select(cfg, key, throw_on_missing=True, default=default)
+        return OmegaConf.to_container(node, resolve=True) if OmegaConf.is_config(node) else node
+    except Exception as exc:
+        raise ConfigError(f"config key {key}: {exc}".splitlines()[0]) from None
+
+
+def _choices(cfg: DictConfig) -> dict[str, str]:
+    """The config group choices (`representation: merl_trilinear`, `hydra/launcher: joblib`)."""
+    node = OmegaConf.select(cfg, "hydra.runtime.choices", throw_on_missing=False)
+    if node is not None:
+        return dict(OmegaConf.to_container(node))
+    from hydra.core.hydra_config import HydraConfig
+
+    if HydraConfig.initialized():
+        return dict(HydraConfig.get().runtime.choices)
+    return {}
+
+
+def to_run_config(cfg: DictConfig, job: str = "") -> RunConfig:
+    """The typed job of a composed config; every key and value is checked, naming it."""
+    unknown = sorted(k for k in cfg.keys() if k not in TOP_LEVEL and k != "hydra")
+    if unknown:
+        raise ConfigError(f"unknown config key(s) {', '.join(unknown)}; known: {', '.join(sorted(TOP_LEVEL))}")
+    rep = _section(cfg, "representation")
+    ds = _section(cfg, "dataset")
+    harness = _section(cfg, "harness")
+    scene = _section(cfg, "scene")
+    for key, section in (("representation", rep), ("dataset", ds)):
+        if "name" not in section:
+            raise ConfigError(f"config key {key}.name is missing")
+    for key, section, allowed in (("representation", rep, {"name", "label", "params"}),
+                                  ("dataset", ds, {"name", "params"}), ("scene", scene, {"name", "params"})):
+        extra = sorted(set(section) - allowed)
+        if extra:
+            raise ConfigError(f"unknown config key(s) {', '.join(f'{key}.{k}' for k in extra)}; "
+                              f"{key} takes {', '.join(sorted(allowed))}")
+    if isinstance(harness.get("sampler_params"), dict):  # a harness yaml may declare sampler keys as null: unset
+        harness["sampler_params"] = {k: v for k, v in harness["sampler_params"].items() if v is not None}
+    choices = _choices(cfg)
+    materials = _value(cfg, "materials")
+    if materials is not None and not isinstance(materials, (list, tuple)):
+        raise ConfigError(f"materials={materials!r} must be a list of material names (e.g. materials=[a,b])")
+    return RunConfig(
+        representation=rep["name"],
+        representation_params=rep.get("params") or {},
+        label=rep.get("label") or choices.get("representation") or rep["name"],
+        dataset=ds["name"],
+        dataset_params=ds.get("params") or {},
+        harness=harness_config(**harness),
+        scene=scene.get("name", "brdf_space"),
+        scene_params=scene.get("params") or {},
+        materials=tuple(materials) if materials else None,
+        limit=_value(cfg, "limit"),
+        seed=_value(cfg, "seed", 0),
+        results_dir=Path(str(_value(cfg, "results_dir", "results"))),
+        save_models=_value(cfg, "save_models", False),
+        isolate=_value(cfg, "isolate", True),
+        progress=_value(cfg, "progress", "auto"),
+        launcher=choices.get("hydra/launcher", "basic"),
+        job=job,
+    )
+
+
+def write_summary(folder: Path, summary: dict[str, Any]) -> None:
+    from .atomic import replacing
+
+    folder.mkdir(parents=True, exist_ok=True)
+    with replacing(folder / JOB_SUMMARY) as tmp:
+        tmp.write_text(json.dumps(summary), encoding="utf-8")

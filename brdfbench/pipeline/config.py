@@ -1,0 +1,84 @@
+"""A job's typed configuration: what to measure (hashed) and how to run it (not hashed).
+
+Every key is checked on construction, so a bad value fails before any work, naming the
+key and what it takes. The harness config is the harness plugin's own typed config,
+built from its `kind` through the registry (`harness_config`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .. import registry
+from ..errors import ConfigError
+from ..harness import HarnessConfig, check_value
+
+PROGRESS = ("auto", "bar", "lines", "none")
+
+
+def harness_class(kind: str):
+    """The harness plugin class registered as `kind` (harness.kind)."""
+    if not isinstance(kind, str):
+        raise ConfigError(f"harness.kind={kind!r} must be a harness name: {', '.join(registry.names('harnesses'))}")
+    try:
+        return registry.get("harnesses", kind).load()
+    except Exception as exc:  # an unknown kind: the registry's message lists the harnesses
+        raise ConfigError(f"harness.kind {kind!r}: {exc}") from None
+
+
+def harness_config(kind: str = "accuracy", **values: Any) -> HarnessConfig:
+    """The typed config of harness `kind` from its keys (unknown keys and bad values named)."""
+    return harness_class(kind).Config.from_dict({"kind": kind, **values})
+
+
+def _default_harness() -> HarnessConfig:
+    return harness_config("accuracy")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """One job: a representation configuration on a dataset through one harness."""
+
+    representation: str
+    representation_params: dict[str, Any]
+    label: str
+    dataset: str
+    dataset_params: dict[str, Any]
+    harness: HarnessConfig = field(default_factory=_default_harness)
+    scene: str = "brdf_space"
+    scene_params: dict[str, Any] = field(default_factory=dict)
+    materials: tuple[str, ...] | None = None
+    limit: int | None = field(default=None, metadata={"min": 1})
+    seed: int = field(default=0, metadata={"min": 0})
+    results_dir: Path = Path("results")
+    save_models: bool = False
+    # run control: how the job runs, never part of a configuration's hash
+    isolate: bool = True  # cells in a worker process with a hard time limit (False: in-process, for debugging)
+    progress: str = field(default="auto", metadata={"choices": PROGRESS})
+    launcher: str = "basic"  # the Hydra launcher that started the job (recorded with every figure)
+    job: str = ""  # the job's number in a sweep, for progress lines
+
+    def __post_init__(self):
+        hints = typing.get_type_hints(type(self))
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.name == "results_dir":
+                if not isinstance(value, (str, Path)) or not str(value):
+                    raise ConfigError(f"results_dir={value!r} must be a folder path")
+                value = Path(value)
+                if value.exists() and not value.is_dir():
+                    raise ConfigError(f"results_dir={str(value)!r} exists and is not a folder")
+            elif f.name == "harness":
+                if not isinstance(value, HarnessConfig):
+                    raise ConfigError(f"harness must be a harness config, got {type(value).__name__}")
+            else:
+                value = check_value(f.name, value, hints[f.name], f.metadata)
+            object.__setattr__(self, f.name, value)
+
+    @property
+    def store_path(self) -> Path:
+        return self.results_dir / "brdfbench.sqlite"

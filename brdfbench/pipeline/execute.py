@@ -1,0 +1,168 @@
+"""Execute: one task of a job, a function of the job and the task alone (run in a worker).
+
+It loads the plugins and the data, fits (timed, peak memory), lets the harness measure
+(peak memory), and emits messages for the supervisor: `("phase", budget_s, what)` before
+each step with a time limit, `("cell", material, category, measurements, status,
+message)` for each finished material. A plugin fault becomes a failed cell; bad data
+(a BrdfbenchError other than a plugin's RenderError) propagates and stops the job.
+Nothing here writes to the store.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import traceback
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import torch
+
+from .. import modelio
+from ..errors import BrdfbenchError, RenderError
+from ..harness import HarnessContext, Measurement
+from ..harness.cost import model_size
+from ..protocol import FIT_LOSS_KEY
+from .config import RunConfig
+from .memory import peak_rss, reset_peak
+from .plan import Checked, Task, check
+
+log = logging.getLogger(__name__)
+
+Emit = Callable[[tuple], None]
+
+
+@dataclass
+class JobState:
+    """What a worker builds once per job and reuses for each of its tasks."""
+
+    checked: Checked
+    harness: Any
+    fitter: Any = None  # one per job: it may carry a shared initialisation across batches
+
+
+def job_state(job: RunConfig) -> JobState:
+    checked = check(job)
+    context = HarnessContext(
+        scene=checked.scene, metric_specs=checked.metric_specs, seed=job.seed, results_dir=job.results_dir,
+        dataset_fingerprint=checked.dataset.fingerprint, representation=job.representation,
+        representation_params=job.representation_params, scene_name=job.scene, scene_params=job.scene_params,
+    )
+    return JobState(checked, checked.harness_cls(job.harness, context))
+
+
+def _describe(exc: BaseException) -> str:
+    return "".join(traceback.format_exception_only(type(exc), exc)).strip()
+
+
+def _limit(job: RunConfig, n: int = 1) -> float | None:
+    return None if job.harness.timeout_s is None else job.harness.timeout_s * n
+
+
+def execute(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency: Callable[[], int] = lambda: 1) -> None:
+    """Run `task`, emitting one cell message per material (see the module docstring)."""
+    dataset, spec = state.checked.dataset, state.checked.rep_spec
+    trained, extra = None, []
+    if task.train is not None:
+        emit(("phase", _limit(job), f"training {job.label} on {len(task.train)} materials"))
+        try:
+            torch.manual_seed(job.seed)
+            trained = spec.create(**job.representation_params)
+            reset_peak()
+            t0 = time.perf_counter()
+            trained.train((dataset.load(n) for n in task.train), seed=job.seed)
+            extra = [Measurement("train_time", time.perf_counter() - t0, "s", False),
+                     *_memory("peak_rss_train")]
+        except RenderError as exc:
+            return _fail_all(emit, dataset, task.materials, f"training failed: {exc}")
+        except BrdfbenchError:
+            raise
+        except Exception as exc:  # a failed training fails every cell of its fold, and the sweep goes on
+            log.warning("training %s failed: %s", job.label, exc)
+            return _fail_all(emit, dataset, task.materials, "training failed: " + _describe(exc))
+        groups = [(name,) for name in task.materials]
+    else:
+        if state.fitter is None:
+            state.fitter = spec.create(**job.representation_params)
+        groups = [task.materials]
+    for chunk in groups:
+        _fit_and_measure(job, chunk, state, trained, extra, emit, concurrency)
+
+
+def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, trained, extra: list, emit: Emit,
+                     concurrency: Callable[[], int]) -> None:
+    dataset = state.checked.dataset
+    materials = [dataset.load(name) for name in chunk]  # bad data raises DataError: stop, naming the file
+    emit(("phase", _limit(job, len(chunk)), f"fitting {job.label} to {', '.join(chunk)}"))
+    busy = concurrency()
+    try:
+        torch.manual_seed(job.seed)
+        reset_peak()
+        t0 = time.perf_counter()
+        if trained is not None:
+            models = [trained.fit(materials[0], seed=job.seed)]
+        else:
+            progress = f"fitting {len(chunk)} materials" if len(chunk) > 1 else False
+            models = state.fitter.fit_many(materials, seed=job.seed, progress=progress)
+        fit_s = (time.perf_counter() - t0) / len(chunk)  # amortised over the batch
+        fit_memory = _memory("peak_rss_fit")
+        if len(models) != len(chunk):
+            raise RuntimeError(f"fit_many returned {len(models)} models for {len(chunk)} materials")
+    except RenderError as exc:
+        return _fail_all(emit, dataset, chunk, str(exc))
+    except BrdfbenchError:
+        raise
+    except Exception as exc:  # a failed fit fails every cell of its batch, and the sweep goes on
+        log.warning("%s failed to fit %s: %s", job.label, ", ".join(chunk), exc)
+        return _fail_all(emit, dataset, chunk, _describe(exc))
+    fit_extra = [Measurement("fit_batch", float(len(chunk)), "materials", False)] if len(chunk) > 1 else []
+    for material, model in zip(materials, models):
+        emit(("phase", _limit(job), f"{job.label} on {material.name}"))
+        try:
+            reset_peak()
+            measurements = state.harness.measure(model, material, job.label)
+            measurements += _memory("peak_rss_eval")
+            measurements.append(Measurement("fit_time", fit_s, "s", False))
+            measurements += fit_extra + fit_memory
+            fit_loss = model.metadata().get(FIT_LOSS_KEY)
+            if isinstance(fit_loss, (int, float)):
+                measurements.append(Measurement("fit_loss", float(fit_loss), "objective", False))
+            measurements += extra
+            measurements += model_size(model)
+            _check_finite(measurements, material.name)
+            if job.save_models:
+                modelio.save(model, job.representation,
+                             job.results_dir / "models" / dataset.fingerprint / job.label / f"{material.name}.safetensors")
+        except (RenderError, NonFinite) as exc:  # the plugin's fault (non-finite values), named with its material
+            log.warning("%s", str(exc))
+            emit(("cell", material.name, material.category, [], "failed", str(exc), busy))
+        except BrdfbenchError:
+            raise
+        except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
+            log.warning("%s failed on %s: %s", job.label, material.name, exc)
+            emit(("cell", material.name, material.category, [], "failed", _describe(exc), busy))
+        else:
+            emit(("cell", material.name, material.category, measurements, "ok", "", max(busy, concurrency())))
+
+
+def _fail_all(emit: Emit, dataset, names, message: str) -> None:
+    for name in names:
+        emit(("cell", name, dataset.category(name), [], "failed", message, 1))
+
+
+def _memory(metric: str) -> list[Measurement]:
+    peak = peak_rss()
+    return [] if peak is None else [Measurement(metric, float(peak), "B", False)]
+
+
+class NonFinite(Exception):
+    pass
+
+
+def _check_finite(measurements: list[Measurement], material: str) -> None:
+    """A NaN or infinite figure is the plugin's failure, named by material and metric."""
+    for m in measurements:
+        if not isinstance(m.value, (int, float)) or not math.isfinite(m.value):
+            at = f" at {m.spp} spp" if m.spp else ""
+            raise NonFinite(f"non-finite {m.metric}{at} ({m.value!r}) on material {material!r}")

@@ -1,0 +1,164 @@
+"""Plan: a job's cells (configuration × material), validated whole before any work starts.
+
+Validation loads the plugins (never fits or renders): an unknown plugin, key or value
+anywhere in the job fails here, naming it. The plan then groups the cells not yet in the
+store into tasks, the units a worker executes: a batch of materials fitted together, or
+one cross-validation fold (train once, then fit and measure each of its materials).
+"""
+
+from __future__ import annotations
+
+import inspect
+import logging
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+
+from .. import registry
+from ..errors import ConfigError
+from ..provenance import config_hash
+from .config import RunConfig, harness_class
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Task:
+    """Materials a worker handles in one go; `train` is the fold's training split, if any."""
+
+    materials: tuple[str, ...]
+    train: tuple[str, ...] | None = None
+
+
+@dataclass
+class Checked:
+    """A job's plugins, loaded and checked."""
+
+    rep_spec: Any
+    rep_cls: type
+    harness_cls: type
+    scene: Any
+    metric_specs: list
+    dataset: Any
+
+
+@dataclass
+class Plan:
+    job: RunConfig
+    checked: Checked
+    config_hash: str
+    params: dict[str, Any]  # everything behind the hash, resolved
+    plugin_version: str
+    columns: dict[str, Any]  # typed store columns of every row (scene, sampler)
+    tasks: list[Task]
+    skipped: int
+
+    @property
+    def dataset(self):
+        return self.checked.dataset
+
+    @property
+    def pending(self) -> int:
+        return sum(len(t.materials) for t in self.tasks)
+
+
+def check_params(cls, params: dict[str, Any], where: str) -> None:
+    """Reject parameters the plugin's constructor does not take, naming the key."""
+    if not isinstance(params, dict):
+        raise ConfigError(f"{where}={params!r} must be a mapping of parameters")
+    sig = inspect.signature(cls)
+    if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+        return
+    for key in params:
+        if key not in sig.parameters:
+            allowed = ", ".join(sig.parameters) or "none"
+            raise ConfigError(f"unknown key {where}.{key}; {where} takes: {allowed}")
+
+
+#: Jobs validated ahead of their run in this process (a sweep's start), taken once by `check`.
+_PRECHECKED: dict[str, Checked] = {}
+
+
+def _key(job: RunConfig) -> str:
+    return repr((job.representation, job.representation_params, job.dataset, job.dataset_params, job.harness,
+                 job.scene, job.scene_params, job.materials, job.limit))
+
+
+def precheck(job: RunConfig) -> Checked:
+    """`check` now, kept for this job's run in this process to take (so it is not done twice)."""
+    checked = check(job)
+    _PRECHECKED[_key(job)] = checked
+    return checked
+
+
+def check(job: RunConfig) -> Checked:
+    """Load and check every plugin the job names, and its data, before any work."""
+    kept = _PRECHECKED.pop(_key(job), None)
+    if kept is not None:
+        return kept
+    rep_spec = registry.get("representations", job.representation)
+    rep_cls = rep_spec.load()
+    check_params(rep_cls, job.representation_params, "representation.params")
+    rep_spec.create(**job.representation_params)  # a bad parameter value fails now, naming it
+    scene_factory = registry.get("scenes", job.scene).load()
+    check_params(scene_factory, job.scene_params, "scene.params")
+    scene = scene_factory(**job.scene_params)
+    harness_cls = harness_class(job.harness.kind)
+    metric_specs = [registry.get("metrics", m) for m in job.harness.metrics]
+    harness_cls.validate(job.harness, scene, metric_specs)
+    ds_factory = registry.get("datasets", job.dataset).load()
+    check_params(ds_factory, job.dataset_params, "dataset.params")
+    dataset = ds_factory(**job.dataset_params).subset(list(job.materials) if job.materials else None, job.limit)
+    return Checked(rep_spec, rep_cls, harness_cls, scene, metric_specs, dataset)
+
+
+def hashed_config(job: RunConfig, harness_cls) -> dict[str, Any]:
+    """What a configuration's hash covers: plugin, parameters, harness and seed (no run control)."""
+    return {"representation": job.representation, "params": job.representation_params, "seed": job.seed,
+            **harness_cls.key(job.harness, job.scene, job.scene_params)}
+
+
+def make_plan(job: RunConfig, done: set[str] | None = None, checked: Checked | None = None) -> Plan:
+    """The job's tasks over the cells not in `done` (materials already in the store)."""
+    checked = checked or check(job)
+    params = hashed_config(job, checked.harness_cls)
+    chash = config_hash(params)
+    dataset = checked.dataset
+    done = done or set()
+    tasks: list[Task] = []
+    skipped = 0
+    if checked.rep_cls.needs_training:
+        for train, fold in plan_folds(dataset.materials, True, job.harness.folds, job.seed):
+            pending = tuple(m for m in fold if m not in done)
+            skipped += len(fold) - len(pending)
+            if pending:
+                tasks.append(Task(pending, tuple(train)))
+    else:
+        pending = tuple(m for m in dataset.materials if m not in done)
+        skipped = len(dataset.materials) - len(pending)
+        batch = max(1, int(checked.rep_spec.create(**job.representation_params).fit_batch_size))
+        tasks = [Task(pending[i:i + batch]) for i in range(0, len(pending), batch)]
+    return Plan(job, checked, chash, params, registry.version("representations", job.representation),
+                checked.harness_cls.columns(job.harness, checked.scene), tasks, skipped)
+
+
+def plan_folds(materials: tuple[str, ...], needs_training: bool, folds: int, seed: int) -> list[tuple[list[str] | None, list[str]]]:
+    """(training materials, materials to fit) pairs.
+
+    A representation without training fits every material in one pass. One that trains
+    is cross-validated over `folds` folds: each material is fitted exactly once, by a
+    model trained on the other folds, so it is never scored on data it learnt from.
+    """
+    if not needs_training:
+        return [(None, list(materials))]
+    if folds < 2 or len(materials) < 2:
+        raise ConfigError(
+            f"harness.folds={folds} over {len(materials)} materials: cross-validation needs at least 2 folds and 2 materials"
+        )
+    if folds > len(materials):
+        log.warning("harness.folds=%d exceeds the %d materials: using %d folds (leave-one-out)", folds, len(materials), len(materials))
+        folds = len(materials)
+    order = torch.randperm(len(materials), generator=torch.Generator().manual_seed(seed)).tolist()
+    groups = [sorted(materials[i] for i in order[f::folds]) for f in range(folds)]
+    return [([m for g in groups if g is not group for m in g], group) for group in groups]

@@ -1,0 +1,11 @@
+"""The built-in report plugins' specs."""
+
+from __future__ import annotations
+
+from brdfbench.specs import ReportSpec
+
+MARKDOWN = ReportSpec(
+    name="markdown",
+    description="leaderboard.md: accuracy beside its cost per dataset and scene, failures, convergence figures (PNG)",
+    target="brdfbench_leaderboard.report:markdown_report",
+)

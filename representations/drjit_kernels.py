@@ -1,0 +1,220 @@
+"""drjit kernels of the built-in representations, built by their `drjit_kernel()` hooks.
+
+The same hook a third party implements (rules in brdfbench.render.drjit_kernels, whose
+helpers and table kernels these build on). Each kernel follows its torch model operation
+by operation (same clamps, same order of the per-material constants, computed on the host
+with the same torch ops), so the two agree to fp32 rounding. Imported only by the hooks,
+inside them: importing a representation imports neither drjit nor mitsuba.
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import torch
+
+from brdfbench import merl
+from brdfbench.nbrdf.network import MAX_LOG_VALUE, Network, n_layers
+from brdfbench.render.drjit_kernels import (FLOAT32_EPS, FLOAT32_MAX, INV_PI, Kernel, MerlTableKernel,
+                                            MerlTrilinearKernel, div, expm1, fp32_values, half_vector, log1p,
+                                            opaque, safe_divisor, table_kernel, to_half_frame)
+
+from .analytic_terms import ALPHA_MIN, COS_MIN
+
+# --------------------------------------------------------------------------- tables
+
+
+def merl_kernel(model) -> Kernel | None:
+    """The table of a fitted `merl` model: nearest cell (also downsampled) or trilinear."""
+    if model.mode == "trilinear":
+        return None if model.table is None else table_kernel(model.table.values, name="merl_trilinear",
+                                                              cls=MerlTrilinearKernel)
+    if model.downsample == 1:
+        if model.table is None:
+            return None
+        return table_kernel(model.table.values, name="merl")
+    if model.samples is None:
+        return None
+    scales = np.asarray(merl.CHANNEL_SCALES).reshape(3, 1, 1, 1)
+    return MerlTableKernel(model.samples * scales, model.downsample, name=f"merl_downsample{model.downsample}")
+
+
+def pca_kernel(model) -> Kernel | None:
+    """The MERL table a fitted `pca` model reconstructed, by nearest cell."""
+    if model.coefficients is None:
+        return None
+    return MerlTableKernel(model.table.values, name="pca")
+
+
+# --------------------------------------------------------------------------- analytic
+
+
+class LambertKernel(Kernel):
+    name = "lambert"
+
+    def __init__(self, model):
+        self.rho_pi = opaque(fp32_values(model.albedo / math.pi))
+
+    def eval(self, wi, wo):
+        return mi.Color3f(*self.rho_pi)
+
+
+class _Geometry:
+    """Twin of analytic_terms.geometry (fp32, same clamps)."""
+
+    COS_MIN = COS_MIN
+
+    def __init__(self, wi, wo):
+        h = half_vector(wi, wo)
+        hz = dr.maximum(h.z, 0.0)
+        s = wi + wo
+        self.cos_i = dr.clip(wi.z, self.COS_MIN, 1.0)
+        self.cos_o = dr.clip(wo.z, self.COS_MIN, 1.0)
+        self.sin2_i = dr.clip(wi.x * wi.x + wi.y * wi.y, 0.0, 1.0)
+        self.sin2_o = dr.clip(wo.x * wo.x + wo.y * wo.y, 0.0, 1.0)
+        self.cos2_h = hz * hz
+        self.sin2_h = dr.clip(h.x * h.x + h.y * h.y, 0.0, 1.0)
+        self.cos_d = dr.clip(0.5 * dr.norm(s), 0.0, 1.0)
+
+
+def _ggx_ndf(a2, g: _Geometry):
+    q = a2 * g.cos2_h + g.sin2_h
+    return a2 / (math.pi * q * q)
+
+
+def _schlick_fresnel(f0, one_minus_f0, cos_d):
+    m = 1.0 - cos_d
+    m2 = m * m
+    return f0 + one_minus_f0 * (m2 * m2 * m)
+
+
+class AnalyticKernel(Kernel):
+    """k_d/π + k_s · lobe, clamped to [0, fp32 max]; subclasses define `lobe`."""
+
+    def __init__(self, model):
+        c = {k: v.to(torch.float32) for k, v in model.coeffs.items()}
+        self.kd_pi = opaque(fp32_values(c["kd"] * INV_PI))
+        self.ks = opaque(fp32_values(c["ks"]))
+        self.shape = {k: opaque(fp32_values(v))[0] for k, v in self.constants({k: v[0] for k, v in c.items()}).items()}
+
+    @staticmethod
+    def constants(c: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """Per-material scalars of the lobe, in fp32 torch ops as analytic.py forms them."""
+        raise NotImplementedError
+
+    def lobe(self, g: _Geometry):
+        raise NotImplementedError
+
+    def eval(self, wi, wo):
+        lobe = self.lobe(_Geometry(wi, wo))
+        out = [kd + lobe * ks for kd, ks in zip(self.kd_pi, self.ks)]
+        return mi.Color3f(*(dr.clip(v, 0.0, FLOAT32_MAX) for v in out))
+
+
+class CookTorranceKernel(AnalyticKernel):
+    name = "cook_torrance"
+
+    @staticmethod
+    def constants(c):
+        alpha = (c["roughness"] * c["roughness"]).clamp(min=ALPHA_MIN)
+        k = 0.5 * alpha * alpha
+        r = (c["ior"] - 1.0) / (c["ior"] + 1.0)
+        f0 = r * r
+        return {"a2": alpha * alpha, "k": k, "one_minus_k": 1.0 - k, "f0": f0, "one_minus_f0": 1.0 - f0}
+
+    def lobe(self, g):
+        p = self.shape
+        k, one_minus_k = p["k"], p["one_minus_k"]
+        geometric = 0.25 / ((g.cos_i * one_minus_k + k) * (g.cos_o * one_minus_k + k))
+        return _ggx_ndf(p["a2"], g) * geometric * _schlick_fresnel(p["f0"], p["one_minus_f0"], g.cos_d)
+
+
+class GGXKernel(AnalyticKernel):
+    name = "ggx"
+
+    @staticmethod
+    def constants(c):
+        alpha = c["alpha"].clamp(min=ALPHA_MIN)
+        return {"a2": alpha * alpha, "f0": c["f0"], "one_minus_f0": 1.0 - c["f0"]}
+
+    def lobe(self, g):
+        p = self.shape
+        a2 = p["a2"]
+        ai = dr.sqrt(g.cos_i * g.cos_i + a2 * g.sin2_i)
+        ao = dr.sqrt(g.cos_o * g.cos_o + a2 * g.sin2_o)
+        smith = 0.5 / (g.cos_o * ai + g.cos_i * ao)
+        return _ggx_ndf(a2, g) * smith * _schlick_fresnel(p["f0"], p["one_minus_f0"], g.cos_d)
+
+
+class BlinnPhongKernel(AnalyticKernel):
+    name = "blinn_phong"
+
+    @staticmethod
+    def constants(c):
+        n = c["exponent"].clamp(min=0.0)
+        return {"n": n, "norm": (n + 8.0) / (8.0 * math.pi)}
+
+    def lobe(self, g):
+        p = self.shape
+        log_cos = 0.5 * log1p(-dr.minimum(g.sin2_h, 1.0 - FLOAT32_EPS))
+        lobe = p["norm"] * dr.exp(p["n"] * log_cos)
+        return dr.select(g.cos2_h > 0, lobe, 0.0)
+
+
+# --------------------------------------------------------------------------- neural
+
+
+class MLPKernel(Kernel):
+    """The NBRDF / naive MLP network (brdfbench.nbrdf.network): dense layers with ReLU,
+    then expm1(min(z, MAX_LOG_VALUE)) clamped at 0, times the channel scales.
+
+    Every weight is an opaque scalar, so materials of one architecture share one compiled
+    kernel. The price: inside Mitsuba's BSDF call, per-instance inputs are read from the
+    call's data with a packet gather per 8 values, which is slower than weights baked in
+    as literals, which would compile a kernel per material.
+    """
+
+    def __init__(self, network: Network, name: str):
+        self.name = name
+        self.features = network.features
+        weights = network.weights
+        self.layers = []
+        for i in range(1, n_layers(weights) + 1):
+            w = weights[f"W{i}"].to(torch.float32).numpy()
+            b = weights[f"b{i}"].to(torch.float32).numpy()
+            flat = opaque(w)
+            cols = [[flat[r * w.shape[1] + c] for r in range(w.shape[0])] for c in range(w.shape[1])]
+            self.layers.append((cols, opaque(b)))
+        self.scale = opaque(network.output_scale.numpy())
+
+    def inputs(self, wi, wo) -> list:
+        if self.features == "directions":
+            return [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z]
+        # Rusinkiewicz (sin θh, 0, cos θh, d): the unit h and the unit ωi in h's frame are
+        # these very sines and cosines, without the angles' atan2 / sin / cos round trip.
+        h = half_vector(wi, wo)
+        rho_h = dr.hypot(h.x, h.y)
+        d = to_half_frame(wi, h, rho_h)
+        d = div(d, safe_divisor(dr.norm(d)))
+        return [rho_h, None, h.z, d.x, d.y, d.z]
+
+    def eval(self, wi, wo):
+        x = self.inputs(wi, wo)
+        for layer, (cols, bias) in enumerate(self.layers):
+            out = []
+            for col, b in zip(cols, bias):
+                acc = b
+                for xi, w in zip(x, col):
+                    if xi is not None:  # the constant 0 input of the Rusinkiewicz encoding
+                        acc = dr.fma(xi, w, acc)
+                out.append(acc)
+            last = layer == len(self.layers) - 1
+            x = out if last else [dr.maximum(v, 0.0) for v in out]
+        values = []
+        for z, scale in zip(x, self.scale):
+            z = dr.minimum(z, MAX_LOG_VALUE)
+            values.append(dr.select(z > 0, expm1(z), 0.0) * scale)
+        return mi.Color3f(*values)
