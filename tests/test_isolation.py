@@ -145,3 +145,21 @@ def test_in_process_cells_give_the_same_figures(tmp_path, synthetic_cache):
     accuracy = ["l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae"]
     values = [f[f.metric.isin(accuracy)].sort_values("metric").value.tolist() for f in (a, b)]
     assert values[0] == values[1] and a.config_hash.iloc[0] == b.config_hash.iloc[0]
+
+
+def test_a_script_without_a_main_guard_runs_once(tmp_path, synthetic_cache):
+    """`spawn` would re-run an unguarded script in the worker; the worker starts without it."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "bench.py"
+    script.write_text(
+        "from brdfbench.runner import RunConfig, harness_config, run\n"
+        "print('script body ran')\n"
+        f"print(run(RunConfig(representation='merl', representation_params={{}}, label='merl', dataset='synthetic',"
+        f" dataset_params={{'size': 'small', 'cache_dir': {str(synthetic_cache)!r}}},"
+        f" harness=harness_config(n_random=1024, throughput_batch=256), results_dir={str(tmp_path / 'res')!r},"
+        " limit=1, progress='none')))\n")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.count("script body ran") == 1 and "'done': 1" in out.stdout

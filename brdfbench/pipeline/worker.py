@@ -16,6 +16,7 @@ environment variables, working folder and in-process plugin registrations.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import logging
 import multiprocessing as mp
 import multiprocessing.util
@@ -87,7 +88,8 @@ class Worker:
         ctx = mp.get_context("spawn")
         parent, child = ctx.Pipe()
         self.process = ctx.Process(target=_worker_main, args=(child,), name="brdfbench-worker", daemon=False)
-        self.process.start()
+        with _main_module_hidden():
+            self.process.start()
         child.close()
         self.conn = parent
         if not parent.poll(START_TIMEOUT_S):
@@ -169,6 +171,22 @@ class Worker:
                 if fatal is not None:
                     raise fatal
                 return Outcome("done", threads=self.threads)
+
+
+@contextlib.contextmanager
+def _main_module_hidden():
+    """Start the worker without re-running the caller's script: `spawn` imports `__main__`
+    again in the child (a script without a `__name__ == "__main__"` guard would run twice);
+    the worker needs nothing from it (plugins are named by import path)."""
+    main = sys.modules.get("__main__")
+    saved = {k: getattr(main, k) for k in ("__file__", "__spec__") if main is not None and hasattr(main, k)}
+    try:
+        for k in saved:
+            setattr(main, k, None) if k == "__spec__" else delattr(main, k)
+        yield
+    finally:
+        for k, v in saved.items():
+            setattr(main, k, v)
 
 
 _WORKER: Worker | None = None
