@@ -12,7 +12,9 @@ In pytest, one test per check:
     def test_conformance(check): check()
 
 Capability tags on the spec select the checks (`fittable`, `reciprocal`, `isotropic`);
-a spec's `xfail_checks` maps a check name to the reason it is expected to fail.
+a spec's `xfail_checks` maps a check name to the reason it is expected to fail, and its
+`check_params` are the constructor arguments of the default, quick run (a short fit, say);
+`full=True` (`brdfbench check NAME --full`) checks the representation's defaults.
 """
 
 from __future__ import annotations

@@ -9,8 +9,8 @@ batches of 2¹⁶; on synthetic materials.
 which builds the direction geometry; `test_later_cell` scores a material after another
 one built it. Each round gets a fresh copy of the material's table, so per-material work
 (scaled values, validity) is always counted. `extra_info` splits the median into accuracy
-and throughput seconds. Disabled (the default run) each scores one cell at 2¹⁰ random
-pairs, as a smoke test.
+and throughput seconds. Disabled (the default run) both are skipped: they time, and
+tests/test_accuracy_geometry.py checks what they run.
 """
 
 from __future__ import annotations
@@ -47,7 +47,8 @@ def _clear_caches() -> None:
         cached.cache_clear()
 
 
-def _run(benchmark, target_of, setup, n_random):
+def _run(benchmark, target_of, setup, n_random: int) -> None:
+    """Time `rounds` cells of fresh copies of `target_of()`, each after `setup()`."""
     specs = [registry.get("metrics", name) for name in METRICS]
     split = []
 
@@ -68,17 +69,21 @@ def _run(benchmark, target_of, setup, n_random):
                                 throughput_s=statistics.median(t for _, t in split))
 
 
-def _n_random(benchmark) -> int:
-    return 2**10 if benchmark.disabled else N_RANDOM
+@pytest.fixture
+def enabled(request):
+    """The benchmark fixture, or a skip where benchmarks are disabled (before it is made)."""
+    config = request.config
+    if config.getoption("benchmark_disable") and not config.getoption("benchmark_enable"):
+        pytest.skip("a timing: run with --benchmark-enable")
+    return request.getfixturevalue("benchmark")
 
 
-def test_first_cell(benchmark, tables):
-    _run(benchmark, lambda: _fresh(tables[0]), _clear_caches, _n_random(benchmark))
+def test_first_cell(enabled, tables):
+    _run(enabled, lambda: _fresh(tables[0]), _clear_caches, N_RANDOM)
 
 
-def test_later_cell(benchmark, tables):
-    n_random = _n_random(benchmark)
+def test_later_cell(enabled, tables):
     first = _fresh(tables[0])
     evaluate_accuracy(registry.get("representations", "merl").create().fit(first), first,
-                      [registry.get("metrics", "l1"), registry.get("metrics", "hdr_mae")], n_random=n_random)
-    _run(benchmark, lambda: _fresh(tables[1]), lambda: None, n_random)
+                      [registry.get("metrics", "l1"), registry.get("metrics", "hdr_mae")], n_random=N_RANDOM)
+    _run(enabled, lambda: _fresh(tables[1]), lambda: None, N_RANDOM)
