@@ -15,11 +15,10 @@ import uuid
 from .pipeline.config import RunConfig, harness_config
 from .pipeline.environment import ActiveMarker, environment
 from .pipeline.execute import execute, job_state
-from .pipeline.plan import check, hashed_config, make_plan, plan_folds
+from .pipeline.plan import check, make_plan, plan_folds
 from .pipeline.progress import Progress
 from .pipeline.record import Recorder
 from .pipeline.worker import shared_worker
-from .provenance import config_hash
 from .store import ResultsStore
 
 __all__ = ["RunConfig", "harness_config", "plan_folds", "run"]
@@ -31,9 +30,7 @@ def run(cfg: RunConfig) -> dict[str, int]:
     """Run one job; returns counts of cells done, skipped and failed."""
     checked = check(cfg)
     store = ResultsStore(cfg.store_path)
-    chash = config_hash(hashed_config(cfg, checked.harness_cls))
-    done = store.done_cells(chash, checked.dataset.fingerprint, checked.harness_cls.scope)
-    plan = make_plan(cfg, done, checked)
+    plan = make_plan(cfg, checked, store.done_cells)
     recorder = Recorder(store, plan, uuid.uuid4().hex[:12])
     counts = {"done": 0, "skipped": plan.skipped, "failed": 0}
     progress = Progress(cfg, len(checked.dataset), plan.skipped)

@@ -90,6 +90,15 @@ class Scene:
         cheap = self.simulator()
         return (cheap, "path") if cheap != "path" else ("path",)
 
+    def chosen_simulator(self, name: str | None = None) -> str:
+        """`name` (harness.simulator), or the cheapest exact one when None; a ConfigError
+        naming the key when that simulator is not exact for this scene."""
+        chosen = name or self.simulator()
+        if chosen not in self.allowed_simulators():
+            raise ConfigError(f"harness.simulator={chosen!r} cannot render scene {self.name!r} exactly; "
+                              f"it allows {', '.join(self.allowed_simulators())}")
+        return chosen
+
 
 # --------------------------------------------------------------------------- parameters
 

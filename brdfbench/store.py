@@ -17,7 +17,6 @@ A store that cannot be read or written is a DataError naming the file and what t
 from __future__ import annotations
 
 import json
-import math
 import sqlite3
 import time
 from contextlib import closing, contextmanager
@@ -177,11 +176,6 @@ class ResultsStore:
         with self._transaction() as con:
             con.execute("INSERT OR IGNORE INTO environments VALUES (?, ?, ?, ?, ?, ?, ?)", tuple(asdict(env).values()))
 
-    def configs(self) -> pd.DataFrame:
-        with self._connection() as con:
-            df = pd.read_sql_query("SELECT * FROM configs", con)
-        return df
-
     # -- cells -------------------------------------------------------------------
     def done_cells(self, config_hash: str, dataset_fingerprint: str, scope: str = "material") -> set[str]:
         """Materials (or sets) of this configuration and data that hold successful rows."""
@@ -263,10 +257,6 @@ def _store_error(path: Path, exc: sqlite3.DatabaseError) -> DataError:
     else:
         hint = "move it aside and run again"
     return DataError(f"{path}: results store error ({text}); {hint}")
-
-
-def finite(value: float | None) -> bool:
-    return value is not None and math.isfinite(value)
 
 
 def now() -> float:

@@ -48,9 +48,10 @@ class HarnessConfig:
     RUN_CONTROL: ClassVar[tuple[str, ...]] = ("timeout_s",)
 
     def __post_init__(self):
+        hints = typing.get_type_hints(type(self))
         for f in dataclasses.fields(self):
-            object.__setattr__(self, f.name, check_value(f"harness.{f.name}", getattr(self, f.name),
-                                                         _hints(type(self))[f.name], f.metadata))
+            object.__setattr__(self, f.name, check_value(f"harness.{f.name}", getattr(self, f.name), hints[f.name],
+                                                         f.metadata))
 
     def hashed(self) -> dict[str, Any]:
         """The fields that decide what is measured (the config hash's share of the harness)."""
@@ -129,10 +130,6 @@ class Harness(ABC):
 
 
 # --------------------------------------------------------------------------- typed values
-
-
-def _hints(cls) -> dict[str, Any]:
-    return typing.get_type_hints(cls)
 
 
 def check_value(key: str, value: Any, hint: Any, rule: typing.Mapping[str, Any] = {}) -> Any:

@@ -139,10 +139,7 @@ def check_simulation(config, scene) -> None:
     """Light up-front checks of the simulator, backend and sampler a rendered harness asks for."""
     from .. import registry
 
-    chosen = config.simulator or scene.simulator()
-    if chosen not in scene.allowed_simulators():
-        raise ConfigError(f"harness.simulator={chosen!r} cannot render scene {scene.name!r} exactly; "
-                          f"it allows {', '.join(scene.allowed_simulators())}")
+    scene.chosen_simulator(config.simulator)
     spec = registry.get("samplers", config.sampler)
     try:
         spec.create(**config.sampler_params)

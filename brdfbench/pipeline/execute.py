@@ -52,7 +52,13 @@ def job_state(job: RunConfig) -> JobState:
     return JobState(checked, checked.harness_cls(job.harness, context))
 
 
-def _describe(exc: BaseException) -> str:
+def _fault(exc: Exception) -> str:
+    """The failure message of a plugin's exception; bad data (any other BrdfbenchError) is
+    re-raised, so that it stops the job naming the file."""
+    if isinstance(exc, (RenderError, NonFinite)):
+        return str(exc)
+    if isinstance(exc, BrdfbenchError):
+        raise exc
     return "".join(traceback.format_exception_only(type(exc), exc)).strip()
 
 
@@ -74,13 +80,10 @@ def execute(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency
             trained.train((dataset.load(n) for n in task.train), seed=job.seed)
             extra = [Measurement("train_time", time.perf_counter() - t0, "s", False),
                      *_memory("peak_rss_train")]
-        except RenderError as exc:
-            return _fail_all(emit, dataset, task.materials, f"training failed: {exc}")
-        except BrdfbenchError:
-            raise
         except Exception as exc:  # a failed training fails every cell of its fold, and the sweep goes on
-            log.warning("training %s failed: %s", job.label, exc)
-            return _fail_all(emit, dataset, task.materials, "training failed: " + _describe(exc))
+            message = "training failed: " + _fault(exc)
+            log.warning("%s: %s", job.label, message)
+            return _fail_all(emit, dataset, task.materials, message)
         groups = [(name,) for name in task.materials]
     else:
         if state.fitter is None:
@@ -109,13 +112,10 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
         fit_memory = _memory("peak_rss_fit")
         if len(models) != len(chunk):
             raise RuntimeError(f"fit_many returned {len(models)} models for {len(chunk)} materials")
-    except RenderError as exc:
-        return _fail_all(emit, dataset, chunk, str(exc))
-    except BrdfbenchError:
-        raise
     except Exception as exc:  # a failed fit fails every cell of its batch, and the sweep goes on
-        log.warning("%s failed to fit %s: %s", job.label, ", ".join(chunk), exc)
-        return _fail_all(emit, dataset, chunk, _describe(exc))
+        message = _fault(exc)
+        log.warning("%s failed to fit %s: %s", job.label, ", ".join(chunk), message)
+        return _fail_all(emit, dataset, chunk, message)
     fit_extra = [Measurement("fit_batch", float(len(chunk)), "materials", False)] if len(chunk) > 1 else []
     for material, model in zip(materials, models):
         emit(("phase", _limit(job), f"{job.label} on {material.name}"))
@@ -134,14 +134,10 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
             if job.save_models:
                 modelio.save(model, job.representation,
                              job.results_dir / "models" / dataset.fingerprint / job.label / f"{material.name}.safetensors")
-        except (RenderError, NonFinite) as exc:  # the plugin's fault (non-finite values), named with its material
-            log.warning("%s", str(exc))
-            emit(("cell", material.name, material.category, [], "failed", str(exc), busy))
-        except BrdfbenchError:
-            raise
         except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
-            log.warning("%s failed on %s: %s", job.label, material.name, exc)
-            emit(("cell", material.name, material.category, [], "failed", _describe(exc), busy))
+            message = _fault(exc)
+            log.warning("%s failed on %s: %s", job.label, material.name, message)
+            emit(("cell", material.name, material.category, [], "failed", message, busy))
         else:
             emit(("cell", material.name, material.category, measurements, "ok", "", max(busy, concurrency())))
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import inspect
 import logging
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import torch
 
@@ -37,6 +37,7 @@ class Checked:
 
     rep_spec: Any
     rep_cls: type
+    probe: Any  # an unfitted instance: proves the parameter values, tells the fit batch size
     harness_cls: type
     scene: Any
     metric_specs: list
@@ -100,7 +101,7 @@ def check(job: RunConfig) -> Checked:
     rep_spec = registry.get("representations", job.representation)
     rep_cls = rep_spec.load()
     check_params(rep_cls, job.representation_params, "representation.params")
-    rep_spec.create(**job.representation_params)  # a bad parameter value fails now, naming it
+    probe = rep_spec.create(**job.representation_params)  # a bad parameter value fails now, naming it
     scene_factory = registry.get("scenes", job.scene).load()
     check_params(scene_factory, job.scene_params, "scene.params")
     scene = scene_factory(**job.scene_params)
@@ -110,7 +111,7 @@ def check(job: RunConfig) -> Checked:
     ds_factory = registry.get("datasets", job.dataset).load()
     check_params(ds_factory, job.dataset_params, "dataset.params")
     dataset = ds_factory(**job.dataset_params).subset(list(job.materials) if job.materials else None, job.limit)
-    return Checked(rep_spec, rep_cls, harness_cls, scene, metric_specs, dataset)
+    return Checked(rep_spec, rep_cls, probe, harness_cls, scene, metric_specs, dataset)
 
 
 def hashed_config(job: RunConfig, harness_cls) -> dict[str, Any]:
@@ -119,13 +120,13 @@ def hashed_config(job: RunConfig, harness_cls) -> dict[str, Any]:
             **harness_cls.key(job.harness, job.scene, job.scene_params)}
 
 
-def make_plan(job: RunConfig, done: set[str] | None = None, checked: Checked | None = None) -> Plan:
-    """The job's tasks over the cells not in `done` (materials already in the store)."""
-    checked = checked or check(job)
+def make_plan(job: RunConfig, checked: Checked, done_cells: Callable[[str, str, str], set[str]]) -> Plan:
+    """The job's tasks over the cells not done yet: `done_cells(config hash, dataset
+    fingerprint, scope)` names the materials (or sets) already in the store."""
     params = hashed_config(job, checked.harness_cls)
     chash = config_hash(params)
     dataset = checked.dataset
-    done = done or set()
+    done = done_cells(chash, dataset.fingerprint, checked.harness_cls.scope)
     tasks: list[Task] = []
     skipped = 0
     if checked.rep_cls.needs_training:
@@ -137,7 +138,7 @@ def make_plan(job: RunConfig, done: set[str] | None = None, checked: Checked | N
     else:
         pending = tuple(m for m in dataset.materials if m not in done)
         skipped = len(dataset.materials) - len(pending)
-        batch = max(1, int(checked.rep_spec.create(**job.representation_params).fit_batch_size))
+        batch = max(1, int(checked.probe.fit_batch_size))
         tasks = [Task(pending[i:i + batch]) for i in range(0, len(pending), batch)]
     return Plan(job, checked, chash, params, registry.version("representations", job.representation),
                 checked.harness_cls.columns(job.harness, checked.scene), tasks, skipped)

@@ -69,7 +69,6 @@ class Outcome:
 
     status: str
     message: str = ""
-    threads: int = 0
 
 
 class Worker:
@@ -170,7 +169,7 @@ class Worker:
             elif kind == "done":
                 if fatal is not None:
                     raise fatal
-                return Outcome("done", threads=self.threads)
+                return Outcome("done")
 
 
 @contextlib.contextmanager

@@ -36,12 +36,7 @@ def build_simulator(scene: Scene, *, name: str | None = None, sampler: str = "co
     `backend` "mitsuba" runs closed form and direct MIS on Mitsuba's JIT (the default where
     drjit loads LLVM ≥ 19), "torch" in torch (the default elsewhere: scalar Mitsuba would
     take one sample per call); the path tracer is always Mitsuba's."""
-    chosen = name or scene.simulator()
-    if chosen not in scene.allowed_simulators():
-        raise ConfigError(
-            f"harness.simulator={chosen!r} cannot render scene {scene.name!r} exactly; "
-            f"it allows {', '.join(scene.allowed_simulators())}"
-        )
+    chosen = scene.chosen_simulator(name)
     if spp is not None and (isinstance(spp, bool) or not isinstance(spp, int) or spp < 1):
         raise ConfigError(f"harness.spp={spp!r} must be a positive integer")
     if backend not in (None, "mitsuba", "torch"):
