@@ -17,7 +17,7 @@ everywhere. Angles → directions → angles is accurate to a few u in θh, θd,
 away from the coordinate singularities, but degrades like u / cos θd near θd = π/2 (h is
 undefined for opposite directions), u / sin θh for φh, and u / sin θd + u / sin θh for φd
 (azimuths are undefined at the poles). In fp32 (u ≈ 6e-8) θh, θd stay within 1e-5 rad for
-θd ≤ 89°, and φh, φd for sin θh, sin θd ≥ 0.05 with θd ≤ 84°; tests/test_coords.py
+θd ≤ 89°, and φh, φd for sin θh, sin θd ≥ 0.05 with θd ≤ 84°; tests/unit/test_coords.py
 checks both, and that the fp32 limit near the singular sets lies in the rounded inputs.
 """
 

@@ -45,15 +45,15 @@ def run(cfg: RunConfig) -> dict[str, int]:
 
     try:
         if cfg.isolate:
-            _run_isolated(cfg, plan, recorder, on_cell)
+            _run_isolated(cfg, plan, recorder, on_cell, progress.note)
         elif plan.tasks:
-            _run_inline(cfg, plan, recorder, on_cell)
+            _run_inline(cfg, plan, recorder, on_cell, progress.note)
     finally:
         progress.close()
     return counts
 
 
-def _run_isolated(cfg: RunConfig, plan, recorder: Recorder, on_cell) -> None:
+def _run_isolated(cfg: RunConfig, plan, recorder: Recorder, on_cell, on_note) -> None:
     worker = shared_worker()
     for task in plan.tasks:
         finished: set[str] = set()
@@ -63,7 +63,7 @@ def _run_isolated(cfg: RunConfig, plan, recorder: Recorder, on_cell) -> None:
             on_cell(message)
 
         recorder.environment(environment(worker.ensure().threads, cfg.launcher))
-        outcome = worker.run(cfg, task, cell)
+        outcome = worker.run(cfg, task, cell, on_note)
         # a hang or a crash: the task's unfinished cells fail with its cause (and none is ever lost)
         message = outcome.message or "the worker finished its task without a result for this material"
         for name in task.materials:
@@ -71,7 +71,7 @@ def _run_isolated(cfg: RunConfig, plan, recorder: Recorder, on_cell) -> None:
                 on_cell((name, plan.dataset.category(name), [], "failed", message, 1))
 
 
-def _run_inline(cfg: RunConfig, plan, recorder: Recorder, on_cell) -> None:
+def _run_inline(cfg: RunConfig, plan, recorder: Recorder, on_cell, on_note) -> None:
     import torch
 
     log.warning("isolate=false: cells run in this process with no time limit")
@@ -82,6 +82,8 @@ def _run_inline(cfg: RunConfig, plan, recorder: Recorder, on_cell) -> None:
     def emit(message: tuple) -> None:
         if message[0] == "cell":
             on_cell(message[1:])
+        elif message[0] == "phase" and message[3] is not None:
+            on_note(message[3])
 
     with marker:
         for task in plan.tasks:

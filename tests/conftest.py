@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
 import os
+import subprocess
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -31,3 +37,117 @@ def _isolated_cache(monkeypatch, synthetic_cache):
 
 def pytest_report_header(config):
     return f"brdfbench tests; torch threads={os.environ.get('OMP_NUM_THREADS', 'default')}"
+
+
+@dataclass
+class CliResult:
+    """What a `brdfbench` invocation returned: the exit status and its two streams."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def _exit_status(code) -> int:
+    if code is None:
+        return 0
+    return code if isinstance(code, int) else 1
+
+
+def run_in_process(args, cwd) -> CliResult:
+    """`brdfbench *args` through `brdfbench.cli.main` in this process, as the console script
+    calls it: the same parsing, validation, Hydra composition and exit status, without a new
+    interpreter; cells still run in the (shared) worker process. Restores what the CLI
+    changes in this process (cwd, argv, environment, logging, Hydra's global state)."""
+    from hydra.core.global_hydra import GlobalHydra
+
+    from brdfbench import cli
+
+    out, err = io.StringIO(), io.StringIO()
+    saved_env, saved_argv, saved_cwd = dict(os.environ), sys.argv[:], os.getcwd()
+    root = logging.getLogger()
+    saved_log = (root.handlers[:], root.level)
+    try:
+        os.chdir(cwd)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                status = cli.main([str(a) for a in args])
+            except SystemExit as exc:
+                status = _exit_status(exc.code)
+    finally:
+        os.chdir(saved_cwd)
+        sys.argv[:] = saved_argv
+        os.environ.clear()
+        os.environ.update(saved_env)
+        root.handlers[:], _ = saved_log
+        root.setLevel(saved_log[1])
+        GlobalHydra.instance().clear()
+    return CliResult(status, out.getvalue(), err.getvalue())
+
+
+def run_subprocess(args, cwd, env=None, timeout=900) -> CliResult:
+    """`brdfbench *args` in a fresh interpreter: for what only a real process shows (signals,
+    exit at interpreter shutdown, worker lifetime)."""
+    done = subprocess.run([sys.executable, "-m", "brdfbench.cli", *map(str, args)], cwd=cwd, capture_output=True,
+                          text=True, env=env, timeout=timeout)
+    return CliResult(done.returncode, done.stdout, done.stderr)
+
+
+@pytest.fixture
+def cli():
+    """`cli(args, cwd)`: run `brdfbench *args` through `brdfbench.cli.main` in this process."""
+    return run_in_process
+
+
+@pytest.fixture
+def cli_process():
+    """`cli_process(args, cwd, env=None)`: run `brdfbench *args` in a fresh interpreter."""
+    return run_subprocess
+
+
+@pytest.fixture(scope="session")
+def nbrdf_release_dir() -> Path:
+    """The published NBRDF networks (../shared/data/neural-brdf); the test skips where absent."""
+    from brdfbench.data.nbrdf_release import find_release_dir
+
+    found = find_release_dir()
+    if found is None:
+        pytest.skip("NBRDF release (shared/data/neural-brdf) not found; set BRDFBENCH_NBRDF_DIR")
+    return found
+
+
+@pytest.fixture(scope="session")
+def nbrdf_release(nbrdf_release_dir):
+    """The release as a dataset, opened once per session."""
+    from brdfbench.data.nbrdf_release import nbrdf_release_dataset
+
+    return nbrdf_release_dataset(str(nbrdf_release_dir))
+
+
+@pytest.fixture(scope="session")
+def fitted():
+    """`fitted(name, **params)`: the registered representation `name` fitted to the kit's
+    reference material (trained first, on `train` materials, where it needs training), made
+    once per session and shared by every test file that asks for the same one. Tests must
+    not change the model they get."""
+    import json
+
+    from brdfbench import registry
+    from brdfbench.testing.kit import reference_material
+
+    cache: dict = {}
+
+    def get(name: str, *, train=None, **params):
+        spec = registry.get("representations", name)
+        trains = spec.load().needs_training
+        key = (name, json.dumps(params, sort_keys=True), tuple(m.name for m in train or ()) if trains else None)
+        if key not in cache:
+            model = spec.create(**params)
+            if model.needs_training:
+                model.train(list(train or ()))
+            if "fittable" in spec.tags:
+                model.fit(reference_material())
+            cache[key] = model
+        return cache[key]
+
+    return get

@@ -9,7 +9,7 @@ pairs, the reference cells of the random pairs, and, for models that are MERL ta
 lookups, the cell data of the pairs they are evaluated at (see `merl.reuse_directions`).
 Models still see the same subsets, chunks, dtypes and reference values as without it,
 and a table lookup gets its cells from the same per-pair arithmetic, run once over all
-pairs (tests/test_accuracy_geometry.py checks the scores equal), so scores are unchanged
+pairs (tests/unit/test_accuracy_geometry.py checks the scores equal), so scores are unchanged
 bit for bit. A geometry holds about 110 MB at the default settings, besides the
 process-wide caches of the grid and random directions it reads.
 """

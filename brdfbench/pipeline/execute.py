@@ -1,9 +1,10 @@
 """Execute: one task of a job, a function of the job and the task alone (run in a worker).
 
 It loads the plugins and the data, fits (timed, peak memory), lets the harness measure
-(peak memory), and emits messages for the supervisor: `("phase", budget_s, what)` before
-each step with a time limit, `("cell", material, category, measurements, status,
-message)` for each finished material. A plugin fault becomes a failed cell; bad data
+(peak memory), and emits messages for the supervisor: `("phase", budget_s, what, note)`
+before each step with a time limit (`note`: a line for the progress log where the step is
+long work, training or a batch fit; else None), `("cell", material, category,
+measurements, status, message)` for each finished material. A plugin fault becomes a failed cell; bad data
 (a BrdfbenchError other than a plugin's RenderError) propagates and stops the job.
 Nothing here writes to the store.
 """
@@ -27,6 +28,7 @@ from ..protocol import FIT_LOSS_KEY
 from .config import RunConfig
 from .memory import peak_rss, reset_peak
 from .plan import Checked, Task, check
+from .progress import mode as progress_mode
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +73,8 @@ def execute(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency
     dataset, spec = state.checked.dataset, state.checked.rep_spec
     trained, extra = None, []
     if task.train is not None:
-        emit(("phase", _limit(job), f"training {job.label} on {len(task.train)} materials"))
+        what = f"training {job.label} on {len(task.train)} materials"
+        emit(("phase", _limit(job), what, what))
         try:
             torch.manual_seed(job.seed)
             trained = spec.create(**job.representation_params)
@@ -97,7 +100,8 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
                      concurrency: Callable[[], int]) -> None:
     dataset = state.checked.dataset
     materials = [dataset.load(name) for name in chunk]  # bad data raises DataError: stop, naming the file
-    emit(("phase", _limit(job, len(chunk)), f"fitting {job.label} to {', '.join(chunk)}"))
+    note = f"fitting {job.label} to {len(chunk)} materials at once" if len(chunk) > 1 else None
+    emit(("phase", _limit(job, len(chunk)), f"fitting {job.label} to {', '.join(chunk)}", note))
     busy = concurrency()
     try:
         torch.manual_seed(job.seed)
@@ -106,7 +110,8 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
         if trained is not None:
             models = [trained.fit(materials[0], seed=job.seed)]
         else:
-            progress = f"fitting {len(chunk)} materials" if len(chunk) > 1 else False
+            # the fit's own bar only where the job shows a bar: in `lines` mode bars would garble the log
+            progress = f"fitting {len(chunk)} materials" if len(chunk) > 1 and progress_mode(job) == "bar" else False
             models = state.fitter.fit_many(materials, seed=job.seed, progress=progress)
         fit_s = (time.perf_counter() - t0) / len(chunk)  # amortised over the batch
         fit_memory = _memory("peak_rss_fit")
@@ -118,7 +123,7 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
         return _fail_all(emit, dataset, chunk, message)
     fit_extra = [Measurement("fit_batch", float(len(chunk)), "materials", False)] if len(chunk) > 1 else []
     for material, model in zip(materials, models):
-        emit(("phase", _limit(job), f"{job.label} on {material.name}"))
+        emit(("phase", _limit(job), f"{job.label} on {material.name}", None))
         try:
             reset_peak()
             measurements = state.harness.measure(model, material, job.label)

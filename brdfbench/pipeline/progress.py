@@ -38,6 +38,12 @@ class Progress:
     def _line(self, text: str) -> None:
         print(f"{self.prefix}{text}", file=sys.stderr, flush=True)
 
+    def note(self, text: str) -> None:
+        """Long work starting (training, a batch fit): a line in `lines` mode, so a log shows
+        what the job is doing between cells; a bar shows it through the fit's own bar."""
+        if self.mode == "lines":
+            self._line(f"{text} ({time.monotonic() - self.start:.0f} s)")
+
     def cell(self, material: str, status: str, measurements: list) -> None:
         self.count += 1
         fit = next((m.value for m in measurements if m.metric == "fit_time"), None)

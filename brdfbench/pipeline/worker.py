@@ -130,7 +130,8 @@ class Worker:
             self._start()
         return self
 
-    def run(self, job: RunConfig, task: Task, on_cell: Callable[[tuple], None]) -> Outcome:
+    def run(self, job: RunConfig, task: Task, on_cell: Callable[[tuple], None],
+            on_note: Callable[[str], None] = lambda note: None) -> Outcome:
         self.ensure()
         envelope = (dict(os.environ), os.getcwd(), registry.snapshot(), job, task)
         self.conn.send(envelope)
@@ -160,6 +161,8 @@ class Worker:
             if kind == "phase":
                 deadline_budget, what = msg[1], msg[2]
                 deadline = None if msg[1] is None else time.monotonic() + msg[1]
+                if msg[3] is not None:
+                    on_note(msg[3])
             elif kind == "cell":
                 on_cell(msg[1:])
             elif kind == "threads":

@@ -4,7 +4,7 @@ Film coordinates (x, y) ∈ [0, 1]² run right and down. `look_at` builds the ca
 Mitsuba's `ScalarTransform4f.look_at` does (columns: left, up, forward), and the horizontal
 field of view `fov` (degrees) spans the film width, so a ray here and the ray Mitsuba's
 sensor generates for the same film position are the same ray (checked in
-tests/test_render.py).
+tests/integration/test_render.py).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ A torch renderer lights an object with `Envmap.eval` and importance-samples it w
 `Envmap.sample` / `Envmap.pdf`; its image is compared with Mitsuba's path tracer using
 `Envmap.mitsuba_dict()`, the `envmap` emitter on the same bitmap, scale and rotation.
 
-Conventions (Mitsuba 3.9.1 `envmap`, checked numerically in tests/test_envmap.py):
+Conventions (Mitsuba 3.9.1 `envmap`, checked numerically in tests/unit/test_envmap.py):
 
 - Local frame: **+Y is up**. A local unit direction d = (x, y, z) has the lat-long
   coordinates u = atan2(x, −z) / 2π (mod 1) and v = arccos(y) / π, the formula of

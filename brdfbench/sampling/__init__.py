@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from torch import Tensor
 
 # torch is imported on first use, not here: entry points name `brdfbench.sampling.specs`,
-# and listing plugins must import no heavy code (tests/test_registry.py).
+# and listing plugins must import no heavy code (tests/unit/test_registry.py).
 _HELPERS = ("cartesian_to_spherical", "direction", "reflect", "spherical_to_cartesian")
 
 __all__ = ["Sampler", *_HELPERS]

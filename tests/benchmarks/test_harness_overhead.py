@@ -10,7 +10,7 @@ which builds the direction geometry; `test_later_cell` scores a material after a
 one built it. Each round gets a fresh copy of the material's table, so per-material work
 (scaled values, validity) is always counted. `extra_info` splits the median into accuracy
 and throughput seconds. Disabled (the default run) both are skipped: they time, and
-tests/test_accuracy_geometry.py checks what they run.
+tests/unit/test_accuracy_geometry.py checks what they run.
 """
 
 from __future__ import annotations

@@ -12,7 +12,6 @@ from hypothesis import strategies as st
 
 from brdfbench import merl, modelio
 from brdfbench.data.nbrdf_h5 import nbrdf_table
-from brdfbench.data.nbrdf_release import find_release_dir, nbrdf_release_dataset
 from brdfbench.errors import ConfigError, ModelFileError
 from brdfbench.nbrdf import network as nw
 from brdfbench.nbrdf.formats import Network, read_network, to_model, write_network
@@ -180,11 +179,8 @@ def test_log_output_revives_it(small_dataset):
 
 
 @pytest.fixture(scope="module")
-def release():
-    found = find_release_dir()
-    if found is None:
-        pytest.skip("NBRDF release (shared/data/neural-brdf) not found; set BRDFBENCH_NBRDF_DIR")
-    return nbrdf_release_dataset(str(found))
+def release(nbrdf_release):
+    return nbrdf_release
 
 
 @pytest.mark.shared_data
@@ -395,8 +391,11 @@ def _run_cfg(tmp_path, synthetic_cache, isolate=True, **params):
     )
 
 
-def test_runner_fits_in_batches(tmp_path, synthetic_cache):
+def test_runner_fits_in_batches(tmp_path, synthetic_cache, capfd):
     counts = run(_run_cfg(tmp_path, synthetic_cache, batch_materials=4))
+    log = capfd.readouterr().err  # `lines` progress: a line as each batch starts, no bar redrawn with \r
+    assert log.count("nbrdf to 4 materials at once") == 1 and log.count("nbrdf to 2 materials at once") == 1
+    assert "\r" not in log and "epoch/s" not in log
     df = ResultsStore(tmp_path / "brdfbench.sqlite").frame()
     assert counts["done"] == 6 and counts["failed"] == 0
     batches = df[df.metric == "fit_batch"].set_index("material")["value"]
@@ -423,21 +422,3 @@ def test_a_failed_batch_fails_its_materials_and_the_sweep_goes_on(tmp_path, synt
     failed = df[df.status == "failed"]
     assert (counts["done"], counts["failed"]) == (2, 4)
     assert set(failed.material) == set(calls[0]) and failed.message.str.contains("out of patience").all()
-
-
-@pytest.mark.shared_data
-def test_cli_fits_nbrdf_on_the_release(tmp_path, release):
-    """`brdfbench representation=nbrdf dataset=nbrdf_release`, cut down: two materials, a short recipe."""
-    import subprocess
-    import sys
-
-    args = ["representation=nbrdf", "dataset=nbrdf_release", "limit=2", "harness=quick", f"results_dir={tmp_path}/res",
-            "representation.params.epochs=2", "representation.params.n_samples=50000"]
-    out = subprocess.run([sys.executable, "-m", "brdfbench.cli", *args], cwd=tmp_path, capture_output=True, text=True,
-                         timeout=600)
-    assert out.returncode == 0, out.stderr
-    board = (tmp_path / "res" / "leaderboard.md").read_text()
-    assert "## Dataset `nbrdf_release`" in board and "`nbrdf`" in board
-    assert "favours `nbrdf`" in board and "materials per fit" in board
-    df = ResultsStore(tmp_path / "res" / "brdfbench.sqlite").frame()
-    assert set(df[df.metric == "fit_batch"].value) == {2.0}

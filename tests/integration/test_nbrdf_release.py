@@ -341,11 +341,8 @@ def test_search_upward(fake_release, monkeypatch, tmp_path):
 
 
 @pytest.fixture(scope="module")
-def release():
-    found = find_release_dir()
-    if found is None:
-        pytest.skip("NBRDF release (shared/data/neural-brdf) not found; set BRDFBENCH_NBRDF_DIR")
-    return found
+def release(nbrdf_release_dir):
+    return nbrdf_release_dir
 
 
 @pytest.mark.shared_data

@@ -72,23 +72,17 @@ def darker_material():
     return type(ref)(name="darker", table=MerlTable(ref.table.raw * 0.5), category=ref.category)
 
 
-def make_model(name: str):
-    """A model of `name` fitted to synthetic material 1 (neural ones: random weights)."""
-    spec = registry.get("representations", name)
-    model = spec.create(**CHEAP.get(name, {}))
+def make_model(fitted, name: str):
+    """A model of `name` fitted to synthetic material 1 (the session's shared fit; neural
+    ones: random weights, the adapter is under test here, not the fit)."""
     if name in ("nbrdf", "naive_mlp"):
-        return random_mlp(model, seed=len(name))
-    if model.needs_training:
-        model.train([reference_material(), darker_material()])
-    if "fittable" in spec.tags:
-        model.fit(reference_material())
-    return model
+        return _random(name)
+    return fitted(name, train=[reference_material(), darker_material()], **CHEAP.get(name, {}))
 
 
 @functools.lru_cache(maxsize=None)
-def fitted(name: str):
-    """One shared model per representation for this module's tests."""
-    return make_model(name)
+def _random(name: str):
+    return random_mlp(registry.get("representations", name).create(), seed=len(name))
 
 
 def directions(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -122,8 +116,8 @@ def adapter_eval(mi, bsdf, light, view, mode=None):
 
 
 @pytest.mark.parametrize("name", registry.names("representations"))
-def test_eval_matches_model(mi, mb, name, record_property):
-    model = fitted(name)
+def test_eval_matches_model(mi, mb, name, record_property, fitted):
+    model = make_model(fitted, name)
     light, view = directions(4096, seed=1)
     expected = (model.eval(light, view) * light[:, 2:3]).numpy()
     native = mb.load_dict(mb.bsdf_dict(model, rep_name=name, material=f"test-{name}"))
@@ -153,8 +147,8 @@ def test_merl_kernel_picks_the_reference_cells(mi):
             assert np.array_equal(ref.numpy(), np.asarray(idx))
 
 
-def test_importance_transport_swaps_the_roles(mi, mb):
-    model = fitted("naive_mlp")  # not reciprocal: the roles matter
+def test_importance_transport_swaps_the_roles(mi, mb, fitted):
+    model = make_model(fitted, "naive_mlp")  # not reciprocal: the roles matter
     light, view = directions(512, seed=2)
     bsdf = mb.load_dict(mb.bsdf_dict(model, rep_name="naive_mlp"))
     got = adapter_eval(mi, bsdf, view, light, mode=mi.TransportMode.Importance)  # si.wi = light, wo = view
@@ -185,8 +179,8 @@ def test_sampler_twin_matches_torch(mi, name):
         np.testing.assert_allclose(np.asarray(twin.pdf(vec(mi, a), vec(mi, b))), sampler.pdf(a, b).numpy(), rtol=1e-4, atol=1e-6)
 
 
-def test_sample_weight_is_eval_over_pdf(mi, mb):
-    model = fitted("ggx")
+def test_sample_weight_is_eval_over_pdf(mi, mb, fitted):
+    model = make_model(fitted, "ggx")
     bsdf = mb.load_dict(mb.bsdf_dict(model, rep_name="ggx", sampler="ggx", sampler_params={"alpha": 0.3}))
     _, view = directions(2048, seed=6)
     si = mi.SurfaceInteraction3f()
@@ -211,8 +205,8 @@ def render(mi, mb, bsdf: dict, **kw) -> np.ndarray:
 
 
 @pytest.mark.parametrize("mode", ["nearest", "trilinear"])
-def test_native_merl_render_equals_torch_path(mi, mb, mode):
-    model = fitted("merl") if mode == "nearest" else registry.get("representations", "merl").create(
+def test_native_merl_render_equals_torch_path(mi, mb, mode, fitted):
+    model = make_model(fitted, "merl") if mode == "nearest" else registry.get("representations", "merl").create(
         mode=mode).fit(reference_material())
     native = render(mi, mb, mb.bsdf_dict(model, rep_name="merl"))
     via_torch = render(mi, mb, mb.bsdf_dict(model, rep_name="merl", kernel="torch"))
@@ -248,15 +242,15 @@ def test_a_name_mitsuba_has_is_registered_with_a_prefix(mi, mb):
         registry.unregister("representations", "diffuse")
 
 
-def test_third_party_sampler_renders_through_torch(mi, mb):
+def test_third_party_sampler_renders_through_torch(mi, mb, fitted):
     registry.register("samplers", SamplerSpec(
         name="test_cosine", description="test plugin", target=f"{__name__}:ThirdPartyCosine"))
     try:
-        bsdf = mb.bsdf_dict(fitted("merl"), rep_name="merl", sampler="test_cosine")
+        bsdf = mb.bsdf_dict(make_model(fitted, "merl"), rep_name="merl", sampler="test_cosine")
         scene = mb.load_dict(mb.sphere_scene(bsdf, resolution=16, spp=4))
         adapter = mb.adapters_in(scene)[0]
         assert (adapter.kernel_path, adapter.sampler_path) == ("native", "torch") and mb.needs_evaluated_mode(scene)
-        native = render(mi, mb, mb.bsdf_dict(fitted("merl"), rep_name="merl"), resolution=16, spp=4)
+        native = render(mi, mb, mb.bsdf_dict(make_model(fitted, "merl"), rep_name="merl"), resolution=16, spp=4)
         np.testing.assert_allclose(np.asarray(mb.render(scene)), native, rtol=1e-4, atol=1e-6)
     finally:
         registry.unregister("samplers", "test_cosine")
@@ -279,8 +273,8 @@ def _render_kernel(mi, mb, bsdf: dict) -> tuple[str, bool]:
 
 
 @pytest.mark.parametrize("name", ["merl", "nbrdf", "ggx"])
-def test_second_material_reuses_the_kernel(mi, mb, name):
-    first = fitted(name)
+def test_second_material_reuses_the_kernel(mi, mb, name, fitted):
+    first = make_model(fitted, name)
     if name == "merl":
         second = type(first)().fit(darker_material())
     elif name == "ggx":
@@ -341,10 +335,10 @@ def test_non_finite_values_raise_render_error(mi, mb, cls, path):
         registry.unregister("representations", name)
 
 
-def test_torch_path_outside_render_mode_says_what_to_do(mi, mb):
+def test_torch_path_outside_render_mode_says_what_to_do(mi, mb, fitted):
     import drjit as dr
 
-    bsdf = mb.bsdf_dict(make_model("lambert"), rep_name="lambert", kernel="torch")
+    bsdf = mb.bsdf_dict(make_model(fitted, "lambert"), rep_name="lambert", kernel="torch")
     scene = mb.load_dict(mb.sphere_scene(bsdf, resolution=8, spp=1))
     assert mb.needs_evaluated_mode(scene)
     with pytest.raises(Exception) as info:  # Mitsuba wraps it; the cause is ours
@@ -358,8 +352,8 @@ def test_torch_path_outside_render_mode_says_what_to_do(mi, mb):
 # --------------------------------------------------------------------------- properties
 
 
-def test_filename_loads_a_saved_model(mi, mb, tmp_path):
-    model = fitted("ggx")
+def test_filename_loads_a_saved_model(mi, mb, tmp_path, fitted):
+    model = make_model(fitted, "ggx")
     path = modelio.save(model, "ggx", tmp_path / "copper.safetensors")
     bsdf = mb.load_dict({"type": "ggx", "filename": str(path), "sampler": "ggx_vndf", "alpha": 0.2})
     assert bsdf.adapter.material == "copper" and bsdf.adapter.sampler.params == {"alpha": 0.2}
@@ -368,8 +362,8 @@ def test_filename_loads_a_saved_model(mi, mb, tmp_path):
                                rtol=2e-5, atol=1e-6)
 
 
-def test_bad_properties_give_clear_errors(mi, mb, tmp_path):
-    model = fitted("lambert")
+def test_bad_properties_give_clear_errors(mi, mb, tmp_path, fitted):
+    model = make_model(fitted, "lambert")
     ok = mb.bsdf_dict(model, rep_name="lambert")
     path = modelio.save(model, "lambert", tmp_path / "chalk.safetensors")
     cases = [
@@ -392,15 +386,15 @@ def test_bad_properties_give_clear_errors(mi, mb, tmp_path):
         mb.bsdf_dict(model, rep_name="lambert", sampler_params={"material": 1})
 
 
-def test_render_mode_only_where_needed(mi, mb):
+def test_render_mode_only_where_needed(mi, mb, fitted):
     import drjit as dr
 
     gc.collect()
-    native = mb.load_dict(mb.bsdf_dict(fitted("merl"), rep_name="merl"))
+    native = mb.load_dict(mb.bsdf_dict(make_model(fitted, "merl"), rep_name="merl"))
     assert not mb.needs_evaluated_mode([native])
     with mb.render_mode([native]) as changed:
         assert not changed and dr.flag(dr.JitFlag.SymbolicCalls)
-    slow = mb.load_dict(mb.bsdf_dict(fitted("merl"), rep_name="merl", kernel="torch"))
+    slow = mb.load_dict(mb.bsdf_dict(make_model(fitted, "merl"), rep_name="merl", kernel="torch"))
     assert slow.adapter.kernel_path == "torch"
     # A symbolic call would trace `slow` too, even for a scene without it.
     assert mb.needs_evaluated_mode([native]) and mb.needs_evaluated_mode()
@@ -430,8 +424,8 @@ SCALAR_SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_scalar_rgb_tiny_render(mb, tmp_path):
-    files = {name: str(modelio.save(fitted(name), name, tmp_path / f"{name}.safetensors"))
+def test_scalar_rgb_tiny_render(mb, tmp_path, fitted):
+    files = {name: str(modelio.save(make_model(fitted, name), name, tmp_path / f"{name}.safetensors"))
              for name in ("merl", "ggx", "nbrdf")}
     env = {**os.environ, mitsuba_env.VARIANT_ENV: "scalar_rgb"}
     done = subprocess.run([sys.executable, "-c", SCALAR_SCRIPT, json.dumps(files)], capture_output=True, text=True,

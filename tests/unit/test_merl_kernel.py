@@ -17,7 +17,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brdfbench import coords, merl, mitsuba_env, registry
+from brdfbench import coords, merl, mitsuba_env
 from brdfbench.testing import adversarial_pairs
 from brdfbench.testing.kit import reference_material
 
@@ -194,11 +194,11 @@ def _kernel_values(kernel, wi, wo) -> np.ndarray:
 
 
 @pytest.mark.parametrize("params", [{}, {"downsample": 4}, {"mode": "trilinear"}], ids=["nearest", "downsample4", "trilinear"])
-def test_kernel_values_equal_the_torch_lookup(dk, params):
+def test_kernel_values_equal_the_torch_lookup(dk, params, fitted):
     """Nearest cells: the very values (fp32 rounding of the table); trilinear: to fp32
     rounding of the weights, including grazing, θh = 0 and invalid neighbours. (Not at
     ωi = ωo, where φd is undefined and its rounding noise picks the φd neighbours.)"""
-    model = registry.get("representations", "merl").create(**params).fit(reference_material())
+    model = fitted("merl", **params)
     kernel = dk.kernel_for(model)
     assert kernel is not None
     wi, wo = random_pairs(200_000, seed=8)

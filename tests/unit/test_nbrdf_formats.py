@@ -7,9 +7,6 @@ Layouts under test: Keras h5 kernels are (in, out); the flat vector of hyperdiff
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import h5py
@@ -24,7 +21,7 @@ from brdfbench import merl, modelio, registry
 from brdfbench.nbrdf import formats as nf
 from brdfbench.nbrdf import network as nw
 from brdfbench.nbrdf.keras_h5 import layout, read_nbrdf_h5
-from brdfbench.errors import BrdfbenchError, DataError, ModelFileError
+from brdfbench.errors import ModelFileError
 from brdfbench.testing import adversarial_pairs
 from brdfbench_representations.nbrdf import NBRDF, NaiveMLP
 
@@ -597,12 +594,13 @@ def test_weights_that_require_grad_are_written(tmp_path):
 # --------------------------------------------------------------------------- the convert command
 
 
-def brdfbench(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "brdfbench.cli", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=120, env=dict(os.environ, OMP_NUM_THREADS="1"))
+@pytest.fixture
+def brdfbench(cli):
+    """The command in this process (`brdfbench.cli.main`)."""
+    return lambda *args, cwd: cli(args, cwd)
 
 
-def test_convert_chain_is_byte_identical(tmp_path):
+def test_convert_chain_is_byte_identical(tmp_path, brdfbench):
     """h5 → npy → pt → safetensors → npy: both .npy files have the same bytes."""
     src = tmp_path / "mat.h5"
     write_h5(src, random_weights(40))
@@ -617,7 +615,7 @@ def test_convert_chain_is_byte_identical(tmp_path):
     assert modelio.load(model)[0] == "nbrdf"
 
 
-def _convert_vector(tmp_path, weights, dest_name, *flags):
+def _convert_vector(brdfbench, tmp_path, weights, dest_name, *flags):
     """Write `weights` as a .npy vector and convert it to `dest_name`; the command must succeed."""
     src, dest = tmp_path / "v.npy", tmp_path / dest_name
     np.save(src, nf.flatten(weights))
@@ -626,18 +624,18 @@ def _convert_vector(tmp_path, weights, dest_name, *flags):
     return dest, out
 
 
-def test_convert_with_hidden_sizes(tmp_path):
+def test_convert_with_hidden_sizes(tmp_path, brdfbench):
     weights = torch_weights(41, (16, 16))
-    dest, out = _convert_vector(tmp_path, weights, "v.pt", "--hidden", "16", "16")
+    dest, out = _convert_vector(brdfbench, tmp_path, weights, "v.pt", "--hidden", "16", "16")
     assert "6-16-16-3" in out.stdout
     state = torch.load(dest, weights_only=True)
     assert state["fc1.weight"].shape == (16, 6)
     assert_same_weights(nf.read_network(dest).weights, weights)
 
 
-def test_convert_raw_units_and_features_reach_the_model_file(tmp_path):
+def test_convert_raw_units_and_features_reach_the_model_file(tmp_path, brdfbench):
     weights = torch_weights(42)
-    dest, out = _convert_vector(tmp_path, weights, "m.safetensors", "--raw-units", "--features", "directions")
+    dest, out = _convert_vector(brdfbench, tmp_path, weights, "m.safetensors", "--raw-units", "--features", "directions")
     assert "raw MERL units" in out.stdout
     name, model = modelio.load(dest)
     assert name == "naive_mlp" and model.params["raw_units"] is True
@@ -649,7 +647,7 @@ TRAINING_PARAMS = ("epochs", "batch_size", "lr", "schedule", "n_samples", "outpu
                    "batch_materials", "init")
 
 
-def test_a_converted_network_records_only_what_is_true_of_it(tmp_path):
+def test_a_converted_network_records_only_what_is_true_of_it(tmp_path, brdfbench):
     """`convert X.h5 Y.safetensors` trains nothing: the model file holds the architecture
     and units (params), the encoding and the source (metadata), and `inspect` shows no
     training parameter or fit result."""
@@ -681,7 +679,7 @@ def test_a_converted_model_converts_again_with_its_own_record(tmp_path):
     assert model.metadata() == {"source": str(first), "features": "directions"}
 
 
-def test_an_h5_with_an_extra_layer_is_refused_by_convert(tmp_path):
+def test_an_h5_with_an_extra_layer_is_refused_by_convert(tmp_path, brdfbench):
     src, dest = tmp_path / "deeper.h5", tmp_path / "out.npy"
     write_h5(src, random_weights(46))
     with h5py.File(src, "a") as f:
@@ -715,7 +713,7 @@ def _pickle_source(tmp_path):
 
 @pytest.mark.parametrize("setup", [_wrong_length, _h5_destination, _pickle_source],
                          ids=["wrong-length-npy", "h5-destination", "pickle-source"])
-def test_convert_errors_exit_2_naming_the_file(tmp_path, setup):
+def test_convert_errors_exit_2_naming_the_file(tmp_path, setup, brdfbench):
     src, dest, named = setup(tmp_path)
     before = sorted(p.name for p in tmp_path.iterdir())
     out = brdfbench("convert", src, dest, cwd=tmp_path)

@@ -15,11 +15,10 @@ import pytest
 import torch
 from scipy import stats
 
-from brdfbench import mitsuba_env, registry, scenes
+from brdfbench import mitsuba_env, scenes
 from brdfbench.render.camera import Camera
 from brdfbench.render.simulate import build_simulator
 from brdfbench.render.simulator import sphere_hits
-from brdfbench.testing.kit import reference_material
 from brdfbench_representations.analytic import GGX
 from brdfbench_representations.lambert import Lambert
 
@@ -136,13 +135,12 @@ def test_direct_mis_backends_agree_within_monte_carlo_error():
 
 
 @pytest.mark.parametrize("kind", ["closed_form", "direct_mis"])
-def test_the_direct_bsdf_call_renders_as_the_virtual_call(kind, monkeypatch):
+def test_the_direct_bsdf_call_renders_as_the_virtual_call(kind, monkeypatch, fitted):
     """A one-shape scene calls its BSDF directly (no dispatch); forcing Mitsuba's per-lane
     virtual call instead renders the same image, for a table, an MLP and an analytic model."""
     from brdfbench.render import mitsuba_integrators
 
-    table = registry.get("representations", "merl").create().fit(reference_material())
-    mlp = registry.get("representations", "nbrdf").create(epochs=1, n_samples=20_000).fit(reference_material())
+    table, mlp = fitted("merl"), fitted("nbrdf", epochs=1, n_samples=20_000)
     scene = (scenes.sphere_directional(width=SIZE, height=SIZE, supersample=2) if kind == "closed_form"
              else scenes.sphere_envmap(width=SIZE, height=SIZE, spp=8, lights=SUN))
     models = {"merl": table, "nbrdf": mlp, "ggx": _ggx()}

@@ -16,7 +16,7 @@ from brdfbench.errors import DataError
 from brdfbench_metrics import image as IM
 from brdfbench_metrics import image_functional as IF
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 FUNCTIONAL = {"mse": IF.mse, "rmse": IF.rmse, "psnr": IF.psnr, "ssim": IF.ssim, "flip": IF.flip}
 IMAGE_METRICS = [f"{m}_{s}" for m in FUNCTIONAL for s in IF.SPACES]
 

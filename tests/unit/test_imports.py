@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CORE = "brdfbench"
 #: The built-in plugin packages, by import name, and their folders (pyproject's package-dir).
 PLUGINS = {"brdfbench_representations": "representations", "brdfbench_generators": "generators",

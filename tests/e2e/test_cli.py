@@ -2,43 +2,44 @@
 
 from __future__ import annotations
 
-import os
 import pickle
 import subprocess
 import sys
 
 import pytest
 
+from brdfbench.store import ResultsStore
+
 QUICK = ["dataset.params.size=small", "harness=quick", "limit=3"]
 
 
-def brdfbench(*args, cwd, env_extra=None):
-    env = dict(os.environ, **(env_extra or {}))
-    return subprocess.run(
-        [sys.executable, "-m", "brdfbench.cli", *args], cwd=cwd, capture_output=True, text=True, env=env, timeout=600,
-    )
+@pytest.fixture
+def brdfbench(cli):
+    """The command in this process (`brdfbench.cli.main`); cells still run in a worker."""
+    return lambda *args, cwd: cli(args, cwd)
 
 
-def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path):
-    out = brdfbench(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
+def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path, cli_process, cli):
+    """The default sweep as a user starts it, in a fresh interpreter: the one full end-to-end run."""
+    out = cli_process([*QUICK, f"results_dir={tmp_path}/res"], tmp_path)
     assert out.returncode == 0, out.stderr
     board = (tmp_path / "res" / "leaderboard.md").read_text()
     assert "`merl`" in board and "`lambert`" in board
     assert "fit time (s)" in board and "evals/s" in board and "bytes" in board
     assert "3 done" in out.stdout
-    again = brdfbench(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
+    again = cli([*QUICK, f"results_dir={tmp_path}/res"], tmp_path)  # the second run, in this process
     assert again.returncode == 0, again.stderr
     assert "0 done, 3 already in the store" in again.stdout
 
 
-def test_explicit_multirun_sweep(tmp_path):
+def test_explicit_multirun_sweep(tmp_path, brdfbench):
     out = brdfbench("-m", "representation=lambert,merl_trilinear", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     board = (tmp_path / "res" / "leaderboard.md").read_text()
     assert "`merl_trilinear`" in board and "`lambert`" in board and "`merl`" not in board
 
 
-def test_render_sweep_with_the_multirun_flag_among_the_overrides(tmp_path):
+def test_render_sweep_with_the_multirun_flag_among_the_overrides(tmp_path, brdfbench):
     """The issue's command shape: `-m` after other overrides, image metrics per material."""
     out = brdfbench("harness=render", "scene=sphere_envmap", "-m", "representation=merl,lambert",
                     "dataset.params.size=small", "limit=1", "scene.params.width=16", "scene.params.height=16",
@@ -51,7 +52,7 @@ def test_render_sweep_with_the_multirun_flag_among_the_overrides(tmp_path):
     assert len(list((tmp_path / "res" / "renders").rglob("*.exr"))) == 3  # reference, merl, lambert
 
 
-def test_list_prints_one_line_per_plugin(tmp_path):
+def test_list_prints_one_line_per_plugin(tmp_path, brdfbench):
     out = brdfbench("list", cwd=tmp_path)
     assert out.returncode == 0
     lines = out.stdout.splitlines()
@@ -59,34 +60,34 @@ def test_list_prints_one_line_per_plugin(tmp_path):
     assert any(line.split()[:2] == ["datasets", "synthetic"] for line in lines)
 
 
-def test_unknown_config_key_names_the_key(tmp_path):
+def test_unknown_config_key_names_the_key(tmp_path, brdfbench):
     out = brdfbench("bogus_key=1", f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode != 0
     assert "bogus_key" in out.stderr
     assert not (tmp_path / "res").exists()
 
 
-def test_unknown_harness_key_names_the_key(tmp_path):
+def test_unknown_harness_key_names_the_key(tmp_path, brdfbench):
     out = brdfbench("+harness.n_randm=5", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 2
     assert "harness.n_randm" in out.stderr
     assert not (tmp_path / "res" / "brdfbench.sqlite").exists()
 
 
-def test_unknown_representation_gets_did_you_mean(tmp_path):
+def test_unknown_representation_gets_did_you_mean(tmp_path, brdfbench):
     out = brdfbench("representation.name=lambret", "hydra.mode=RUN", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 2
     assert "Did you mean 'lambert'" in out.stderr
     assert not (tmp_path / "res" / "leaderboard.md").exists()
 
 
-def test_unknown_config_option_lists_choices(tmp_path):
+def test_unknown_config_option_lists_choices(tmp_path, brdfbench):
     out = brdfbench("representation=lambret", f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode != 0
     assert "lambret" in out.stderr and "lambert" in out.stderr
 
 
-def test_merl_folder_that_is_not_a_merl_folder(tmp_path):
+def test_merl_folder_that_is_not_a_merl_folder(tmp_path, brdfbench):
     (tmp_path / "notmerl").mkdir()
     (tmp_path / "notmerl" / "readme.txt").write_text("hello")
     out = brdfbench("dataset=merl_folder", f"dataset.params.path={tmp_path}/notmerl", "hydra.mode=RUN",
@@ -96,7 +97,7 @@ def test_merl_folder_that_is_not_a_merl_folder(tmp_path):
     assert not (tmp_path / "res" / "leaderboard.md").exists()
 
 
-def test_truncated_merl_file_is_named(tmp_path):
+def test_truncated_merl_file_is_named(tmp_path, brdfbench):
     folder = tmp_path / "merl"
     folder.mkdir()
     (folder / "broken.binary").write_bytes(b"\x5a\x00\x00\x00" * 3 + b"\x00" * 100)
@@ -107,7 +108,7 @@ def test_truncated_merl_file_is_named(tmp_path):
     assert not (tmp_path / "res" / "leaderboard.md").exists()
 
 
-def test_inspect_refuses_a_pickle(tmp_path):
+def test_inspect_refuses_a_pickle(tmp_path, brdfbench):
     path = tmp_path / "model.safetensors"
     path.write_bytes(pickle.dumps({"weights": [1, 2, 3]}))
     out = brdfbench("inspect", str(path), cwd=tmp_path)
@@ -115,23 +116,22 @@ def test_inspect_refuses_a_pickle(tmp_path):
     assert str(path) in out.stderr and "pickle" in out.stderr
 
 
-def test_report_without_store_is_an_error(tmp_path):
+def test_report_without_store_is_an_error(tmp_path, brdfbench):
     out = brdfbench("report", "--results", str(tmp_path / "nothing"), cwd=tmp_path)
     assert out.returncode == 2
     assert "no results store" in out.stderr
 
 
 @pytest.mark.slow
-def test_default_benchmark_full_size(tmp_path):
-    out = brdfbench(f"results_dir={tmp_path}/res", cwd=tmp_path)
+def test_default_benchmark_full_size(tmp_path, cli_process):
+    out = cli_process([f"results_dir={tmp_path}/res"], tmp_path)
     assert out.returncode == 0, out.stderr
 
 
-def test_inspect_shows_params_and_fit_metadata(tmp_path):
-    from brdfbench import modelio, registry
-    from brdfbench.testing.kit import reference_material
+def test_inspect_shows_params_and_fit_metadata(tmp_path, brdfbench, fitted):
+    from brdfbench import modelio
 
-    model = registry.get("representations", "ggx").create().fit(reference_material())
+    model = fitted("ggx")
     path = modelio.save(model, "ggx", tmp_path / "ggx.safetensors")
     out = brdfbench("inspect", str(path), cwd=tmp_path)
     assert out.returncode == 0, out.stderr
@@ -139,7 +139,7 @@ def test_inspect_shows_params_and_fit_metadata(tmp_path):
     assert f"fit_loss: {model.fit_loss}" in out.stdout
 
 
-def test_version_prints_the_brdfbench_version(tmp_path):
+def test_version_prints_the_brdfbench_version(tmp_path, brdfbench):
     from brdfbench import __version__
 
     out = brdfbench("--version", cwd=tmp_path)
@@ -147,7 +147,7 @@ def test_version_prints_the_brdfbench_version(tmp_path):
     assert out.stdout.strip() == f"brdfbench {__version__}"
 
 
-def test_help_lists_subcommands_config_groups_and_their_options(tmp_path):
+def test_help_lists_subcommands_config_groups_and_their_options(tmp_path, brdfbench):
     from importlib import resources
 
     out = brdfbench("--help", cwd=tmp_path)
@@ -163,7 +163,7 @@ def test_help_lists_subcommands_config_groups_and_their_options(tmp_path):
     assert not (tmp_path / "results").exists()
 
 
-def test_hydra_help_stays_reachable(tmp_path):
+def test_hydra_help_stays_reachable(tmp_path, brdfbench):
     out = brdfbench("--hydra-help", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "Hydra" in out.stdout and "--multirun" in out.stdout
@@ -178,3 +178,17 @@ def test_list_into_a_closed_pipe_ends_without_a_traceback(tmp_path):
     proc.stderr.close()
     assert proc.wait(timeout=600) == 141  # as a tool killed by SIGPIPE
     assert "Traceback" not in stderr and "BrokenPipeError" not in stderr, stderr
+
+
+@pytest.mark.shared_data
+def test_cli_fits_nbrdf_on_the_release(tmp_path, brdfbench, nbrdf_release_dir):
+    """`brdfbench representation=nbrdf dataset=nbrdf_release`, cut down: two materials, a short recipe."""
+    args = ["representation=nbrdf", "dataset=nbrdf_release", "limit=2", "harness=quick", f"results_dir={tmp_path}/res",
+            "representation.params.epochs=2", "representation.params.n_samples=50000"]
+    out = brdfbench(*args, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    board = (tmp_path / "res" / "leaderboard.md").read_text()
+    assert "## Dataset `nbrdf_release`" in board and "`nbrdf`" in board
+    assert "favours `nbrdf`" in board and "materials per fit" in board
+    df = ResultsStore(tmp_path / "res" / "brdfbench.sqlite").frame()
+    assert set(df[df.metric == "fit_batch"].value) == {2.0}

@@ -4,9 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -21,9 +18,10 @@ from brdfbench.errors import DataError
 from brdfbench.protocol import Material
 
 
-def brdfbench(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "brdfbench.cli", *args], cwd=cwd, capture_output=True, text=True,
-                          env=dict(os.environ), timeout=600)
+@pytest.fixture
+def brdfbench(cli):
+    """The command in this process (`brdfbench.cli.main`)."""
+    return lambda *args, cwd: cli(args, cwd)
 
 
 def one_error_line(out) -> str:
@@ -94,7 +92,7 @@ def test_non_finite_cells_from_any_loader_are_a_data_error(value):
 
 
 @pytest.mark.parametrize("representation", ["lambert", "merl"])
-def test_all_invalid_table_stops_the_run_before_any_plugin_fault(tmp_path, folder, representation):
+def test_all_invalid_table_stops_the_run_before_any_plugin_fault(tmp_path, folder, representation, brdfbench):
     """lambert and merl used to record IndexError / 'L1.compute() called before any update' as plugin faults."""
     bad = write_table(folder / "negative.binary", np.full((3, *merl.SHAPE), -1.0))
     (folder / "good.binary").unlink()
@@ -109,7 +107,7 @@ def test_all_invalid_table_stops_the_run_before_any_plugin_fault(tmp_path, folde
 # --------------------------------------------------------------------------- merl_folder paths
 
 
-def test_merl_folder_given_a_file_is_one_line(tmp_path, folder):
+def test_merl_folder_given_a_file_is_one_line(tmp_path, folder, brdfbench):
     out = brdfbench("dataset=merl_folder", f"dataset.params.path={folder / 'good.binary'}", "hydra.mode=RUN",
                     f"results_dir={tmp_path}/res", cwd=tmp_path)
     line = one_error_line(out)
@@ -120,7 +118,7 @@ def test_merl_folder_given_a_file_is_one_line(tmp_path, folder):
 # --------------------------------------------------------------------------- model files
 
 
-def test_inspect_of_a_model_naming_another_representation_is_one_line(tmp_path):
+def test_inspect_of_a_model_naming_another_representation_is_one_line(tmp_path, brdfbench):
     from brdfbench import registry
 
     ggx = registry.get("representations", "ggx").create()

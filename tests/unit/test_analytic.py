@@ -1,7 +1,7 @@
 """Analytic baselines (cook_torrance, ggx, blinn_phong): formulas, physics, numerical
 stability in fp32, and fitting (recovery, robustness, determinism).
 
-The conformance kit runs over these plugins too (tests/test_conformance.py); the tests
+The conformance kit runs over these plugins too (tests/unit/test_conformance.py); the tests
 here are the ones specific to the models.
 """
 

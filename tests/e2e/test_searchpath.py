@@ -283,8 +283,9 @@ def test_launcher_presets_extend_the_plugin_configs(tmp_path):
             assert "include_dashboard: false" in own and "include_dashboard" not in plugin
 
 
+# The joblib preset's sweep runs in tests/e2e/test_sweeps.py
+# (test_two_launchers_write_one_store_without_loss_or_duplicates), beside a basic-launcher run.
 @pytest.mark.parametrize("preset", [
-    "brdfbench_joblib",  # the local launcher; loky pickles the job as submitit and Ray do
     pytest.param("brdfbench_submitit_local", marks=pytest.mark.slow),  # Slurm's code path, locally
 ])
 def test_sweep_on_a_launcher(preset, tmp_path):
