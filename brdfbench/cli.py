@@ -6,6 +6,7 @@ leaderboard). Subcommands that need no config:
 
     brdfbench list                      one line per registered plugin
     brdfbench report [--results DIR]    regenerate the leaderboard from the results store
+    brdfbench merge SRC... --into DIR   copy the cells of other results folders into DIR's store
     brdfbench check NAME                run the conformance kit on a representation
     brdfbench inspect MODEL.safetensors describe a saved model (loads no code)
     brdfbench convert SRC DEST          convert neural-BRDF weights between formats
@@ -26,7 +27,7 @@ from pathlib import Path
 
 from .errors import BrdfbenchError
 
-SUBCOMMANDS = ("list", "report", "check", "inspect", "convert")
+SUBCOMMANDS = ("list", "report", "merge", "check", "inspect", "convert")
 EXIT_ERROR = 2
 EXIT_BROKEN_PIPE = 128 + 13  # as a process killed by SIGPIPE
 
@@ -53,7 +54,29 @@ def cmd_list(args) -> int:
 def cmd_report(args) -> int:
     from .report import write_reports
 
-    for path in write_reports(Path(args.results)):
+    for path in write_reports(Path(args.results), args.store):
+        print(path)
+    return 0
+
+
+def cmd_merge(args) -> int:
+    """Stores written apart (one per node) into one: every source is opened first (a missing
+    one fails before anything is written), then merged cell by cell, each cell in one
+    transaction (a finished cell is never replaced, so merging again is harmless), then the
+    reports are rewritten."""
+    from .report import write_reports
+    from .store_protocol import merge, open_store
+
+    into = Path(args.into).resolve()
+    sources = [open_store(args.store, Path(src), {"create": False}) for src in args.sources]
+    for src, store in zip(args.sources, sources):
+        if Path(src).resolve() == into:
+            raise BrdfbenchError(f"{src}: a results folder cannot be merged into itself")
+    target = open_store(args.store, into)
+    for store in sources:
+        counts = merge(store, target)
+        print(f"{store.location}: {counts['written']} cells merged, {counts['kept']} already in {target.location}")
+    for path in write_reports(into, args.store):
         print(path)
     return 0
 
@@ -99,7 +122,13 @@ def _subcommand_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_list)
     p = sub.add_parser("report", help="regenerate the leaderboard from a results store")
     p.add_argument("--results", default="results", help="results folder holding brdfbench.sqlite (default: results)")
+    p.add_argument("--store", default="sqlite", help="results store plugin (default: sqlite)")
     p.set_defaults(func=cmd_report)
+    p = sub.add_parser("merge", help="copy the cells of other results folders into one store, then rewrite its reports")
+    p.add_argument("sources", nargs="+", metavar="SRC", help="results folders to read (e.g. one per node)")
+    p.add_argument("--into", required=True, metavar="DIR", help="results folder to merge into (created if new)")
+    p.add_argument("--store", default="sqlite", help="results store plugin of all of them (default: sqlite)")
+    p.set_defaults(func=cmd_merge)
     p = sub.add_parser("check", help="run the conformance kit on a registered representation")
     p.add_argument("name")
     p.add_argument("--pairs", type=int, default=10**6, help="adversarial direction pairs per dtype (default 1e6)")

@@ -37,7 +37,7 @@ def _app(cfg: DictConfig) -> None:
                                "sweep": os.environ.get("BRDFBENCH_SWEEP_ID")}
     try:
         run_cfg = to_run_config(cfg, job=job)
-        summary["results_dir"] = str(run_cfg.results_dir)
+        summary.update(results_dir=str(run_cfg.results_dir), store=run_cfg.store, store_params=run_cfg.store_params)
         counts = run(run_cfg)
         summary.update(counts, label=run_cfg.label)
         print(f"{run_cfg.label}: {counts['done']} done, {counts['skipped']} already in the store, "

@@ -71,9 +71,11 @@ def finish(summaries: list[dict[str, Any]], expected: int | None = None) -> int:
     from .report import write_reports
 
     code = 0
-    for folder in sorted({s["results_dir"] for s in summaries if s.get("results_dir")}):
+    stores = {(s["results_dir"], s.get("store", "sqlite"), json.dumps(s.get("store_params") or {}, sort_keys=True))
+              for s in summaries if s.get("results_dir")}
+    for folder, store, params in sorted(stores):
         try:
-            paths = write_reports(Path(folder))
+            paths = write_reports(Path(folder), store, json.loads(params))
             print(f"leaderboard: {paths[0]}", flush=True)
         except BrdfbenchError as exc:
             print(f"brdfbench: error: {exc}", file=sys.stderr, flush=True)

@@ -15,7 +15,7 @@ from .runner import RunConfig, harness_config
 JOB_SUMMARY = "brdfbench_job.json"
 #: Top-level keys of config.yaml besides the groups; anything else is a typo.
 TOP_LEVEL = {"representation", "dataset", "harness", "scene", "seed", "materials", "limit", "results_dir", "save_models",
-             "isolate", "progress"}
+             "isolate", "progress", "store", "store_params"}
 
 
 def _section(cfg: DictConfig, key: str) -> dict:
@@ -89,6 +89,8 @@ def to_run_config(cfg: DictConfig, job: str = "") -> RunConfig:
         seed=_value(cfg, "seed", 0),
         results_dir=Path(str(_value(cfg, "results_dir", "results"))),
         save_models=_value(cfg, "save_models", False),
+        store=_value(cfg, "store", "sqlite"),
+        store_params=_section(cfg, "store_params"),
         isolate=_value(cfg, "isolate", True),
         progress=_value(cfg, "progress", "auto"),
         launcher=choices.get("hydra/launcher", "basic"),

@@ -1,7 +1,7 @@
 """Lazy plugin registry over Python entry points.
 
 Groups: brdfbench.representations, .generators, .metrics, .datasets, .scenes, .samplers,
-.harnesses, .reports. Built-ins
+.harnesses, .reports, .stores. Built-ins
 register through the same groups a third party uses; the core imports no plugin by name.
 Entry points are listed without importing anything; a spec is imported on first use.
 """
@@ -14,7 +14,7 @@ from importlib.metadata import EntryPoint, entry_points
 
 from .errors import PluginError
 from .specs import (DatasetSpec, GeneratorSpec, HarnessSpec, MetricSpec, PluginSpec, ReportSpec, RepresentationSpec,
-                    SamplerSpec, SceneSpec)
+                    SamplerSpec, SceneSpec, StoreSpec)
 
 GROUPS: dict[str, type[PluginSpec]] = {
     "representations": RepresentationSpec,
@@ -25,6 +25,7 @@ GROUPS: dict[str, type[PluginSpec]] = {
     "samplers": SamplerSpec,
     "harnesses": HarnessSpec,
     "reports": ReportSpec,
+    "stores": StoreSpec,
 }
 
 SINGULAR = {"harnesses": "harness"}

@@ -4,21 +4,19 @@ the built-in is the Markdown leaderboard) renders the store's rows into files th
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from . import registry
-from .errors import DataError
-from .store import ResultsStore
+from .store_protocol import open_store
 
 
-def write_reports(results_dir: Path) -> list[Path]:
-    """Regenerate every report of `results_dir` from its store; returns the paths written,
-    the Markdown leaderboard first where it is registered."""
-    db = Path(results_dir) / "brdfbench.sqlite"
-    if not db.is_file():
-        raise DataError(f"{db}: no results store here (run the benchmark first)")
-    df = ResultsStore(db).frame()
+def write_reports(results_dir: Path, store: str = "sqlite", store_params: dict[str, Any] | None = None) -> list[Path]:
+    """Regenerate every report of `results_dir` from its store (which must exist already);
+    returns the paths written, the Markdown leaderboard first where it is registered."""
+    opened = open_store(store, results_dir, {**(store_params or {}), "create": False})
+    df = opened.frame()
     names = sorted(registry.names("reports"), key=lambda n: (n != "markdown", n))
     paths: list[Path] = []
     for name in names:
-        paths += registry.get("reports", name).load()(df, Path(results_dir), str(db))
+        paths += registry.get("reports", name).load()(df, Path(results_dir), opened.location)
     return paths

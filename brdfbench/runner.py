@@ -19,7 +19,6 @@ from .pipeline.plan import check, make_plan, plan_folds
 from .pipeline.progress import Progress
 from .pipeline.record import Recorder
 from .pipeline.worker import shared_worker
-from .store import ResultsStore
 
 __all__ = ["RunConfig", "harness_config", "plan_folds", "run"]
 
@@ -29,7 +28,7 @@ log = logging.getLogger(__name__)
 def run(cfg: RunConfig) -> dict[str, int]:
     """Run one job; returns counts of cells done, skipped and failed."""
     checked = check(cfg)
-    store = ResultsStore(cfg.store_path)
+    store = cfg.open_store()
     plan = make_plan(cfg, checked, store.done_cells)
     recorder = Recorder(store, plan, uuid.uuid4().hex[:12])
     counts = {"done": 0, "skipped": plan.skipped, "failed": 0}

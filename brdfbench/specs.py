@@ -64,6 +64,9 @@ class GeneratorSpec(PluginSpec):
 class DatasetSpec(PluginSpec):
     """A source of target materials; `target` is a callable returning a `brdfbench.data.Dataset`."""
 
+    #: what the dataset's figures do and do not show, printed under its heading in reports
+    caveat: str = ""
+
 
 @dataclass(frozen=True)
 class MetricSpec(PluginSpec):
@@ -71,6 +74,9 @@ class MetricSpec(PluginSpec):
 
     unit: str = ""
     higher_is_better: bool = False
+    #: reports rank representations by the present metric of lowest `rank` (None: shown, but
+    #: chosen to rank only when no ranked metric is present)
+    rank: int | None = None
 
 
 @dataclass(frozen=True)
@@ -86,6 +92,12 @@ class HarnessSpec(PluginSpec):
 @dataclass(frozen=True)
 class ReportSpec(PluginSpec):
     """A report; `target` is a callable (results frame, results folder, store name) -> paths written."""
+
+
+@dataclass(frozen=True)
+class StoreSpec(PluginSpec):
+    """A results store backend; `target(results_dir, **params)` returns a
+    `brdfbench.store_protocol.Store`."""
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ import json
 import sqlite3
 import time
 from contextlib import closing, contextmanager
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -28,66 +28,34 @@ import pandas as pd
 
 from .errors import DataError
 from .store_migrations import migrate_v1
-from .store_schema import SCHEMA, SCHEMA_VERSION, UNKNOWN_ENV
+from .store_protocol import CELL, ConfigRecord, Environment, Row, Store
+from .store_schema import SCHEMA, SCHEMA_VERSION
 
+__all__ = ["CELL", "COLUMNS", "SCHEMA_VERSION", "ConfigRecord", "Environment", "ResultsStore", "Row", "STORE_FILE",
+           "sqlite_store"]
 
+#: The store's file name inside a results folder.
+STORE_FILE = "brdfbench.sqlite"
 
-@dataclass(frozen=True)
-class Row:
-    run_id: str
-    config_hash: str
-    dataset: str
-    dataset_fingerprint: str
-    material: str  # the material, or the set's name for scope="set"
-    category: str
-    metric: str
-    value: float | None
-    unit: str
-    higher_is_better: bool
-    status: str  # "ok" or "failed"
-    message: str
-    seed: int
-    package_version: str
-    git_sha: str
-    timestamp: float
-    scene: str = "brdf_space"  # the scene the metric was measured in (brdf_space: no rendering)
-    sampler: str = ""  # the importance sampler of a Monte Carlo figure, else ""
-    spp: int = 0  # samples per pixel of a per-rung figure (convergence), else 0
-    scope: str = "material"  # "material": one material's figure; "set": a whole set's
-    env_id: str = UNKNOWN_ENV
-    concurrent_jobs: int = 1  # brdfbench cells running on this host while this one ran (itself included)
-
-
-@dataclass(frozen=True)
-class ConfigRecord:
-    config_hash: str
-    label: str
-    plugin: str
-    plugin_version: str
-    harness: str
-    params: dict[str, Any]
-
-
-@dataclass(frozen=True)
-class Environment:
-    env_id: str
-    host: str
-    cpu_model: str
-    cpu_count: int
-    threads: int
-    launcher: str
-    platform: str
 
 
 COLUMNS = [f.name for f in fields(Row)]
-CELL = ("config_hash", "dataset_fingerprint", "scope", "material")
 
 
-class ResultsStore:
+def sqlite_store(results_dir: Path, create: bool = True, file: str = STORE_FILE) -> "ResultsStore":
+    """The `sqlite` store plugin: `file` inside the results folder (`create=False`: it must exist)."""
+    path = Path(results_dir) / file
+    if not create and not path.is_file():
+        raise DataError(f"{path}: no results store here (run the benchmark first)")
+    return ResultsStore(path)
+
+
+class ResultsStore(Store):
     """One SQLite file; every method opens its own connection (safe across processes)."""
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
+        self.location = str(self.path)
         if self.path.is_dir():
             raise DataError(f"{self.path}: the results store path is a directory; give a file path")
         try:
@@ -185,9 +153,6 @@ class ResultsStore:
                 " AND status='ok'", (config_hash, dataset_fingerprint, scope))
             return {r[0] for r in cur}
 
-    def has_cell(self, config_hash: str, dataset_fingerprint: str, material: str, scope: str = "material") -> bool:
-        return material in self.done_cells(config_hash, dataset_fingerprint, scope)
-
     def write_cell(self, rows: list[Row]) -> bool:
         """Insert one cell's rows in one transaction; returns False when the cell was already done.
 
@@ -210,6 +175,32 @@ class ResultsStore:
         return True
 
     # -- reading -----------------------------------------------------------------
+    def configs(self) -> list[ConfigRecord]:
+        with self._connection() as con:
+            rows = con.execute("SELECT config_hash, label, plugin, plugin_version, harness, params FROM configs"
+                               " ORDER BY config_hash").fetchall()
+        return [ConfigRecord(*r[:5], params=json.loads(r[5])) for r in rows]
+
+    def environments(self) -> list[Environment]:
+        with self._connection() as con:
+            rows = con.execute(f"SELECT {', '.join(f.name for f in fields(Environment))} FROM environments"
+                               " ORDER BY env_id").fetchall()
+        return [Environment(*r) for r in rows]
+
+    def cells(self) -> Iterator[list[Row]]:
+        """Every cell's rows in insertion order, one list per cell."""
+        with self._connection() as con:
+            cur = con.execute(f"SELECT {', '.join(COLUMNS)} FROM results ORDER BY {', '.join(CELL)}, rowid")
+            cell: list[Row] = []
+            for values in cur:
+                row = Row(**dict(zip(COLUMNS, values)))
+                if cell and tuple(getattr(cell[0], k) for k in CELL) != tuple(getattr(row, k) for k in CELL):
+                    yield cell
+                    cell = []
+                cell.append(_typed(row, self.path))
+            if cell:
+                yield cell
+
     def frame(self, **where: Any) -> pd.DataFrame:
         """All rows (optionally filtered by column equality) with their configuration and
         environment: `representation` is the configuration's label, `params` its JSON."""
@@ -231,6 +222,17 @@ class ResultsStore:
         df["value"] = pd.to_numeric(df["value"]).astype(float)
         df["higher_is_better"] = df["higher_is_better"].astype(bool)
         return df
+
+
+def _typed(row: Row, path: Path) -> Row:
+    """A row as read back (SQLite keeps booleans as integers); a non-numeric value is a damaged store."""
+    from dataclasses import replace
+
+    if row.value is not None and (isinstance(row.value, bool) or not isinstance(row.value, (int, float))):
+        raise DataError(f"{path}: a {row.metric} row of {row.material} holds a non-numeric value {row.value!r}; "
+                        "the store is damaged: move it aside and run again")
+    return replace(row, higher_is_better=bool(row.higher_is_better),
+                   value=None if row.value is None else float(row.value))
 
 
 def _check_values(df: pd.DataFrame, path: Path) -> None:

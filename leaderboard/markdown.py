@@ -30,16 +30,6 @@ COST_LABELS = {
 CONTENDED = "†"
 
 
-#: Caveats printed under a dataset's heading: what its numbers do and do not show.
-DATASET_NOTES = {
-    "nbrdf_release": (
-        "Targets are the published NBRDF networks (Sztrajman et al. 2021) evaluated on the MERL grid, "
-        "not the measurements: refitting an NBRDF-generated table favours `nbrdf` (it can represent "
-        "its target exactly), so its lead here overstates its accuracy on measured data."
-    ),
-}
-
-
 def fmt(value: float) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "–"
@@ -68,15 +58,15 @@ def dataset_section(name: str, fingerprint: str, df: pd.DataFrame, scene: str = 
     if scene != "brdf_space":
         lines += ["> Image metrics compare each representation's render with the render of the material's own "
                   "table (nearest-cell lookup) through the same simulator and random numbers.", ""]
-    if name in DATASET_NOTES:
-        lines += [f"> {DATASET_NOTES[name]}", ""]
+    caveat = tables.dataset_caveat(name)
+    if caveat:
+        lines += [f"> {caveat}", ""]
     primary = tables.primary_metric(summary)
     if primary is None:
         lines += ["No successful results yet.", ""]
     else:
         ranked = tables.ranking(summary, primary)
-        accuracy_metrics = [m for m in tables.PRIMARY_METRICS + ("hdr_mae",) if m in set(summary.metric)]
-        accuracy_metrics += sorted(set(summary.metric) - set(accuracy_metrics) - set(tables.COST_METRICS))
+        accuracy_metrics = tables.accuracy_metrics(summary)
         costs = [c for c in tables.COST_METRICS if c in set(summary.metric)]
         lookup = {(r.representation, r.metric): r for r in summary.itertuples() if r.spp == 0}
         header = ["rank", "representation"]

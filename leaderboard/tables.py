@@ -12,10 +12,6 @@ from typing import Any
 
 import pandas as pd
 
-#: Accuracy metric used to rank, first one present wins.
-PRIMARY_METRICS = ("l1_log_cos", "l1_log", "l1", "hdr_rmse",
-                   # rendered scenes (each scene is its own section)
-                   "psnr_ldr", "ssim_ldr", "flip_ldr", "psnr_hdr", "ssim_hdr", "flip_hdr", "rmse_hdr", "rmse_ldr")
 #: Columns shown beside accuracy, with the aggregate that makes sense for each: costs, and a
 #: model's own final fit loss (each family's own objective: not comparable across families,
 #: so never ranked).
@@ -142,11 +138,39 @@ def failures(df: pd.DataFrame) -> pd.DataFrame:
     return merged[merged["_merge"] == "left_only"][["representation", "material", "message"]]
 
 
+def metric_rank(name: str) -> int | None:
+    """The metric plugin's ranking preference (`MetricSpec.rank`); None for an unranked or
+    unregistered one (a store may hold figures of a plugin no longer installed)."""
+    from brdfbench import registry
+
+    try:
+        return registry.get("metrics", name).rank
+    except Exception:  # an unknown name: the registry's lookup error
+        return None
+
+
+def dataset_caveat(name: str) -> str:
+    """What the dataset plugin says its figures do not show (`DatasetSpec.caveat`), or ""."""
+    from brdfbench import registry
+
+    try:
+        return registry.get("datasets", name).caveat
+    except Exception:
+        return ""
+
+
+def accuracy_metrics(summary: pd.DataFrame) -> list[str]:
+    """The non-cost metrics present: ranked ones by rank, then the others by name."""
+    present = set(summary["metric"]) - set(COST_METRICS)
+    ranks = {m: metric_rank(m) for m in present}
+    return sorted(present, key=lambda m: (ranks[m] is None, ranks[m] or 0, m))
+
+
 def primary_metric(summary: pd.DataFrame) -> str | None:
-    """The first of PRIMARY_METRICS present, else the first other non-cost metric (a plugin's own)."""
-    present = set(summary.loc[summary["spp"] == 0, "metric"]) if "spp" in summary else set(summary["metric"])
-    known = next((m for m in PRIMARY_METRICS if m in present), None)
-    return known or next(iter(sorted(present - set(COST_METRICS))), None)
+    """The present metric of lowest rank, else the first other non-cost metric by name (a plugin's own)."""
+    rows = summary[summary["spp"] == 0] if "spp" in summary else summary
+    ordered = accuracy_metrics(rows)
+    return ordered[0] if ordered else None
 
 
 def ranking(summary: pd.DataFrame, metric: str) -> pd.DataFrame:

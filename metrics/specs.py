@@ -5,26 +5,31 @@ from brdfbench.specs import MetricSpec
 L1 = MetricSpec(
     name="l1", description="Mean |f1 - f2| over valid MERL grid cells", target="brdfbench_metrics.base:L1",
     unit="1/sr", higher_is_better=False, tags=frozenset({"brdf_space", "merl_grid"}),
+    rank=2,
 )
 L1_LOG = MetricSpec(
     name="l1_log", description="Mean |log(1+f1) - log(1+f2)| over valid MERL grid cells (seed 000)",
     target="brdfbench_metrics.base:L1Log", unit="log(1+1/sr)", higher_is_better=False,
     tags=frozenset({"brdf_space", "merl_grid"}),
+    rank=1,
 )
 L1_LOG_COS = MetricSpec(
     name="l1_log_cos", description="Mean |log(1+f1 cos θi) - log(1+f2 cos θi)| over valid MERL grid cells (seed 000)",
     target="brdfbench_metrics.base:L1LogCos", unit="log(1+1/sr)", higher_is_better=False,
     tags=frozenset({"brdf_space", "merl_grid"}),
+    rank=0,
 )
 HDR_RMSE = MetricSpec(
     name="hdr_rmse", description="RMSE of unclipped BRDF values over random (ωi, ωo) pairs",
     target="brdfbench_metrics.base:HDRRMSE", unit="1/sr", higher_is_better=False,
     tags=frozenset({"brdf_space", "random_pairs"}),
+    rank=3,
 )
 HDR_MAE = MetricSpec(
     name="hdr_mae", description="MAE of unclipped BRDF values over random (ωi, ωo) pairs",
     target="brdfbench_metrics.base:HDRMAE", unit="1/sr", higher_is_better=False,
     tags=frozenset({"brdf_space", "random_pairs"}),
+    rank=4,
 )
 
 # Image metrics (domain "image"): scored on rendered images, never on BRDF values. "ldr":
@@ -32,9 +37,14 @@ HDR_MAE = MetricSpec(
 _IMAGE = frozenset({"image"})
 
 
+#: Ranking preference of the image metrics (lower first); the others are shown, not ranked by.
+_IMAGE_RANKS = {"psnr_ldr": 10, "ssim_ldr": 11, "flip_ldr": 12, "psnr_hdr": 13, "ssim_hdr": 14, "flip_hdr": 15,
+                "rmse_hdr": 16, "rmse_ldr": 17}
+
+
 def _image(name: str, description: str, cls: str, unit: str, higher_is_better: bool) -> MetricSpec:
     return MetricSpec(name=name, description=description, target=f"brdfbench_metrics.image:{cls}", unit=unit,
-                      higher_is_better=higher_is_better, tags=_IMAGE)
+                      higher_is_better=higher_is_better, tags=_IMAGE, rank=_IMAGE_RANKS.get(name))
 
 
 MSE_LDR = _image("mse_ldr", "Image MSE of tone-mapped (sRGB, [0, 1]) images", "MSELDR", "1", False)

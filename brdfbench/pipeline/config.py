@@ -57,6 +57,8 @@ class RunConfig:
     results_dir: Path = Path("results")
     save_models: bool = False
     # run control: how the job runs, never part of a configuration's hash
+    store: str = "sqlite"  # the results store plugin (group `stores`), opened for results_dir
+    store_params: dict[str, Any] = field(default_factory=dict)
     isolate: bool = True  # cells in a worker process with a hard time limit (False: in-process, for debugging)
     progress: str = field(default="auto", metadata={"choices": PROGRESS})
     launcher: str = "basic"  # the Hydra launcher that started the job (recorded with every figure)
@@ -79,6 +81,8 @@ class RunConfig:
                 value = check_value(f.name, value, hints[f.name], f.metadata)
             object.__setattr__(self, f.name, value)
 
-    @property
-    def store_path(self) -> Path:
-        return self.results_dir / "brdfbench.sqlite"
+    def open_store(self):
+        """The job's results store (the `store` plugin for `results_dir`)."""
+        from ..store_protocol import open_store
+
+        return open_store(self.store, self.results_dir, self.store_params)

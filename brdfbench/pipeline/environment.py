@@ -17,7 +17,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..provenance import config_hash
-from ..store import Environment
+from ..store_protocol import Environment
 
 ACTIVE_DIR = Path(tempfile.gettempdir()) / f"brdfbench-active-{os.getuid() if hasattr(os, 'getuid') else 0}"
 

@@ -98,6 +98,7 @@ def check(job: RunConfig) -> Checked:
     kept = _PRECHECKED.pop(_key(job), None)
     if kept is not None:
         return kept
+    check_params(registry.get("stores", job.store).load(), job.store_params, "store_params")
     rep_spec = registry.get("representations", job.representation)
     rep_cls = rep_spec.load()
     check_params(rep_cls, job.representation_params, "representation.params")

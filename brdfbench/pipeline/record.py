@@ -10,12 +10,13 @@ from __future__ import annotations
 from .. import __version__
 from ..harness import Measurement
 from ..provenance import git_sha
-from ..store import ConfigRecord, Environment, ResultsStore, Row, now
+from ..store import now
+from ..store_protocol import ConfigRecord, Environment, Row, Store
 from .plan import Plan
 
 
 class Recorder:
-    def __init__(self, store: ResultsStore, plan: Plan, run_id: str):
+    def __init__(self, store: Store, plan: Plan, run_id: str):
         self.store = store
         self.plan = plan
         self.run_id = run_id

@@ -192,3 +192,29 @@ def test_cli_fits_nbrdf_on_the_release(tmp_path, brdfbench, nbrdf_release_dir):
     assert "favours `nbrdf`" in board and "materials per fit" in board
     df = ResultsStore(tmp_path / "res" / "brdfbench.sqlite").frame()
     assert set(df[df.metric == "fit_batch"].value) == {2.0}
+
+
+def test_merge_combines_results_folders_into_one_leaderboard(tmp_path, brdfbench):
+    """Two folders written apart (as two nodes would) merge into one store and leaderboard;
+    merging again adds nothing; a missing source fails before anything is written."""
+    for rep, folder in (("lambert", "node1"), ("merl", "node2")):
+        out = brdfbench(f"representation={rep}", *QUICK[:2], "limit=2", f"results_dir={tmp_path / folder}",
+                        cwd=tmp_path)
+        assert out.returncode == 0, out.stderr
+    out = brdfbench("merge", str(tmp_path / "node1"), str(tmp_path / "node2"), "--into", str(tmp_path / "all"),
+                    cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "2 cells merged, 0 already in" in out.stdout
+    board = (tmp_path / "all" / "leaderboard.md").read_text()
+    assert "`lambert`" in board and "`merl`" in board
+    df = ResultsStore(tmp_path / "all" / "brdfbench.sqlite").frame()
+    assert df.groupby(["representation", "material", "metric"]).size().max() == 1 and len(df.material.unique()) == 2
+    again = brdfbench("merge", str(tmp_path / "node1"), "--into", str(tmp_path / "all"), cwd=tmp_path)
+    assert again.returncode == 0 and "0 cells merged, 2 already in" in again.stdout
+    assert len(ResultsStore(tmp_path / "all" / "brdfbench.sqlite").frame()) == len(df)
+    missing = brdfbench("merge", str(tmp_path / "node1"), str(tmp_path / "gone"), "--into", str(tmp_path / "new"),
+                        cwd=tmp_path)
+    assert missing.returncode == 2 and f"{tmp_path / 'gone'}/brdfbench.sqlite: no results store here" in missing.stderr
+    assert not (tmp_path / "new").exists() and not (tmp_path / "gone").exists()
+    itself = brdfbench("merge", str(tmp_path / "node1"), "--into", str(tmp_path / "node1"), cwd=tmp_path)
+    assert itself.returncode == 2 and "cannot be merged into itself" in itself.stderr

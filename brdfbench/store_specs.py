@@ -1,0 +1,11 @@
+"""The built-in store backend's spec."""
+
+from __future__ import annotations
+
+from .specs import StoreSpec
+
+SQLITE = StoreSpec(
+    name="sqlite",
+    description="one SQLite file in the results folder (WAL): safe for many processes on one host",
+    target="brdfbench.store:sqlite_store",
+)
