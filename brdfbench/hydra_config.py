@@ -22,6 +22,8 @@ def _section(cfg: DictConfig, key: str) -> dict:
     node = OmegaConf.select(cfg, key, throw_on_missing=False)
     if node is None:
         return {}
+    if not OmegaConf.is_config(node):  # a scalar where a mapping belongs (`store_params=5`)
+        raise ConfigError(f"config key {key}={node!r} must be a mapping (e.g. +{key}.name=value)")
     try:
         value = OmegaConf.to_container(node, resolve=True, throw_on_missing=True)
     except Exception as exc:  # omegaconf's MissingMandatoryValue and interpolation errors name the key

@@ -64,16 +64,20 @@ class Plan:
         return sum(len(t.materials) for t in self.tasks)
 
 
-def check_params(cls, params: dict[str, Any], where: str) -> None:
-    """Reject parameters the plugin's constructor does not take, naming the key."""
+def check_params(cls, params: dict[str, Any], where: str, internal: tuple[str, ...] = ()) -> None:
+    """Reject parameters the plugin's constructor does not take, naming the key; `internal`
+    ones are passed by brdfbench itself, never by a config."""
     if not isinstance(params, dict):
         raise ConfigError(f"{where}={params!r} must be a mapping of parameters")
+    for key in params:
+        if key in internal:
+            raise ConfigError(f"{where}.{key} is set by brdfbench, not by a config")
     sig = inspect.signature(cls)
     if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
         return
     for key in params:
         if key not in sig.parameters:
-            allowed = ", ".join(sig.parameters) or "none"
+            allowed = ", ".join(k for k in sig.parameters if k not in internal) or "none"
             raise ConfigError(f"unknown key {where}.{key}; {where} takes: {allowed}")
 
 
@@ -98,7 +102,8 @@ def check(job: RunConfig) -> Checked:
     kept = _PRECHECKED.pop(_key(job), None)
     if kept is not None:
         return kept
-    check_params(registry.get("stores", job.store).load(), job.store_params, "store_params")
+    check_params(registry.get("stores", job.store).load(), job.store_params, "store_params",
+                 internal=("results_dir", "create"))
     rep_spec = registry.get("representations", job.representation)
     rep_cls = rep_spec.load()
     check_params(rep_cls, job.representation_params, "representation.params")

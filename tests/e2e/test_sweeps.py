@@ -51,6 +51,7 @@ def test_a_bad_override_in_any_job_fails_before_any_work(tmp_path, _cli):
     ("save_models=word", "save_models='word' must be true or false"),
     ("harness.metrics=l1", "harness.metrics='l1' must be a list"),
     ("results_dir=/dev/null", "results_dir='/dev/null' exists and is not a folder"),
+    ("store_params=5", "config key store_params=5 must be a mapping"),
 ])
 def test_bad_values_are_named_with_what_they_take(tmp_path, override, match):
     from hydra import compose, initialize_config_module

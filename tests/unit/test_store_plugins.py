@@ -104,8 +104,10 @@ def test_the_runner_writes_through_the_chosen_store(tmp_path, synthetic_cache):
         assert run(cfg)["done"] == 1
         assert not (tmp_path / "brdfbench.sqlite").exists()
         assert set(ResultsStore(tmp_path / "x.sqlite").frame().material) == {"synth-plastic-green-00"}
-        with pytest.raises(ConfigError, match=r"unknown key store_params.nme"):
+        with pytest.raises(ConfigError, match=r"unknown key store_params.nme; store_params takes: name$"):
             run(RunConfig(**{**cfg.__dict__, "store_params": {"nme": "x.sqlite"}}))
+        with pytest.raises(ConfigError, match=r"store_params.create is set by brdfbench, not by a config"):
+            run(RunConfig(**{**cfg.__dict__, "store_params": {"create": False}}))
     finally:
         registry.unregister("stores", "sqlite_elsewhere")
 
