@@ -96,8 +96,8 @@ class ReportSpec(PluginSpec):
 
 @dataclass(frozen=True)
 class StoreSpec(PluginSpec):
-    """A results store backend; `target(results_dir, **params)` returns a
-    `brdfbench.store_protocol.Store`."""
+    """A results store backend; `target(results_dir, create=True, **params)` returns a
+    `brdfbench.store_protocol.Store` (see that module for the contract)."""
 
 
 @dataclass(frozen=True)

@@ -228,17 +228,22 @@ def _typed(row: Row, path: Path) -> Row:
     """A row as read back (SQLite keeps booleans as integers); a non-numeric value is a damaged store."""
     from dataclasses import replace
 
-    if row.value is not None and (isinstance(row.value, bool) or not isinstance(row.value, (int, float))):
+    if not _numeric(row.value):
         raise DataError(f"{path}: a {row.metric} row of {row.material} holds a non-numeric value {row.value!r}; "
                         "the store is damaged: move it aside and run again")
     return replace(row, higher_is_better=bool(row.higher_is_better),
                    value=None if row.value is None else float(row.value))
 
 
+def _numeric(value: Any) -> bool:
+    """A stored value is a number or NULL (SQLite columns take any type)."""
+    return value is None or (isinstance(value, (int, float)) and not isinstance(value, bool))
+
+
 def _check_values(df: pd.DataFrame, path: Path) -> None:
     """A value that is not a number (SQLite stores any type) is a damaged store, named by row."""
     for row_id, value in zip(df["row_id"], df["value"]):
-        if value is None or (isinstance(value, (int, float)) and not isinstance(value, bool)):
+        if _numeric(value):
             continue
         raise DataError(f"{path}: row {row_id} holds a non-numeric value {value!r}; "
                         "the store is damaged: move it aside and run again")

@@ -19,11 +19,12 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
-
-import pandas as pd
+from typing import TYPE_CHECKING, Any, Iterator
 
 from .store_schema import UNKNOWN_ENV
+
+if TYPE_CHECKING:  # the protocol and its records import no pandas; a backend's frame() does
+    import pandas as pd
 
 
 @dataclass(frozen=True)

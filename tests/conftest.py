@@ -79,7 +79,7 @@ def run_in_process(args, cwd) -> CliResult:
         sys.argv[:] = saved_argv
         os.environ.clear()
         os.environ.update(saved_env)
-        root.handlers[:], _ = saved_log
+        root.handlers[:] = saved_log[0]
         root.setLevel(saved_log[1])
         GlobalHydra.instance().clear()
     return CliResult(status, out.getvalue(), err.getvalue())
@@ -95,14 +95,14 @@ def run_subprocess(args, cwd, env=None, timeout=900) -> CliResult:
 
 @pytest.fixture
 def cli():
-    """`cli(args, cwd)`: run `brdfbench *args` through `brdfbench.cli.main` in this process."""
-    return run_in_process
+    """`cli(*args, cwd=...)`: run `brdfbench *args` through `brdfbench.cli.main` in this process."""
+    return lambda *args, cwd: run_in_process(args, cwd)
 
 
 @pytest.fixture
 def cli_process():
-    """`cli_process(args, cwd, env=None)`: run `brdfbench *args` in a fresh interpreter."""
-    return run_subprocess
+    """`cli_process(*args, cwd=..., env=None)`: run `brdfbench *args` in a fresh interpreter."""
+    return lambda *args, cwd, env=None: run_subprocess(args, cwd, env)
 
 
 @pytest.fixture(scope="session")

@@ -4,8 +4,9 @@ It loads the plugins and the data, fits (timed, peak memory), lets the harness m
 (peak memory), and emits messages for the supervisor: `("phase", budget_s, what, note)`
 before each step with a time limit (`note`: a line for the progress log where the step is
 long work, training or a batch fit; else None), `("cell", material, category,
-measurements, status, message)` for each finished material. A plugin fault becomes a failed cell; bad data
-(a BrdfbenchError other than a plugin's RenderError) propagates and stops the job.
+measurements, status, message)` for each finished material. A plugin fault becomes a
+failed cell; bad data (a BrdfbenchError other than a plugin's RenderError) propagates and
+stops the job.
 Nothing here writes to the store.
 """
 

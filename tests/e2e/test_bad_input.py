@@ -18,12 +18,6 @@ from brdfbench.errors import DataError
 from brdfbench.protocol import Material
 
 
-@pytest.fixture
-def brdfbench(cli):
-    """The command in this process (`brdfbench.cli.main`)."""
-    return lambda *args, cwd: cli(args, cwd)
-
-
 def one_error_line(out) -> str:
     """The single error line of a failed command (progress lines may precede it)."""
     assert out.returncode == 2, (out.stdout, out.stderr)
@@ -92,11 +86,11 @@ def test_non_finite_cells_from_any_loader_are_a_data_error(value):
 
 
 @pytest.mark.parametrize("representation", ["lambert", "merl"])
-def test_all_invalid_table_stops_the_run_before_any_plugin_fault(tmp_path, folder, representation, brdfbench):
+def test_all_invalid_table_stops_the_run_before_any_plugin_fault(tmp_path, folder, representation, cli):
     """lambert and merl used to record IndexError / 'L1.compute() called before any update' as plugin faults."""
     bad = write_table(folder / "negative.binary", np.full((3, *merl.SHAPE), -1.0))
     (folder / "good.binary").unlink()
-    out = brdfbench(f"representation={representation}", "dataset=merl_folder", f"dataset.params.path={folder}",
+    out = cli(f"representation={representation}", "dataset=merl_folder", f"dataset.params.path={folder}",
                     "hydra.mode=RUN", "harness=quick", f"results_dir={tmp_path}/res", cwd=tmp_path)
     line = one_error_line(out)
     assert str(bad) in line and "no valid (non-negative) cells" in line
@@ -107,8 +101,8 @@ def test_all_invalid_table_stops_the_run_before_any_plugin_fault(tmp_path, folde
 # --------------------------------------------------------------------------- merl_folder paths
 
 
-def test_merl_folder_given_a_file_is_one_line(tmp_path, folder, brdfbench):
-    out = brdfbench("dataset=merl_folder", f"dataset.params.path={folder / 'good.binary'}", "hydra.mode=RUN",
+def test_merl_folder_given_a_file_is_one_line(tmp_path, folder, cli):
+    out = cli("dataset=merl_folder", f"dataset.params.path={folder / 'good.binary'}", "hydra.mode=RUN",
                     f"results_dir={tmp_path}/res", cwd=tmp_path)
     line = one_error_line(out)
     assert f"{folder / 'good.binary'}: is a MERL file, not a directory; pass its folder ({folder})" in line
@@ -118,16 +112,16 @@ def test_merl_folder_given_a_file_is_one_line(tmp_path, folder, brdfbench):
 # --------------------------------------------------------------------------- model files
 
 
-def test_inspect_of_a_model_naming_another_representation_is_one_line(tmp_path, brdfbench):
+def test_inspect_of_a_model_naming_another_representation_is_one_line(tmp_path, cli):
     from brdfbench import registry
 
     ggx = registry.get("representations", "ggx").create()
     path = tmp_path / "model.safetensors"
     header = {"format": "brdfbench.model/1", "representation": "lambert", "params": {}, "metadata": {}}
     safetensors.torch.save_file(ggx.state_dict(), str(path), metadata={"brdfbench": json.dumps(header)})
-    line = one_error_line(brdfbench("inspect", str(path), cwd=tmp_path))
+    line = one_error_line(cli("inspect", str(path), cwd=tmp_path))
     assert str(path) in line and "'albedo'" in line
     header["params"] = {"bogus": 1}
     safetensors.torch.save_file({"albedo": torch.ones(3)}, str(path), metadata={"brdfbench": json.dumps(header)})
-    line = one_error_line(brdfbench("inspect", str(path), cwd=tmp_path))
+    line = one_error_line(cli("inspect", str(path), cwd=tmp_path))
     assert str(path) in line and "'bogus'" in line and "it takes: no params" in line

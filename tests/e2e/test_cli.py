@@ -13,35 +13,29 @@ from brdfbench.store import ResultsStore
 QUICK = ["dataset.params.size=small", "harness=quick", "limit=3"]
 
 
-@pytest.fixture
-def brdfbench(cli):
-    """The command in this process (`brdfbench.cli.main`); cells still run in a worker."""
-    return lambda *args, cwd: cli(args, cwd)
-
-
 def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path, cli_process, cli):
     """The default sweep as a user starts it, in a fresh interpreter: the one full end-to-end run."""
-    out = cli_process([*QUICK, f"results_dir={tmp_path}/res"], tmp_path)
+    out = cli_process(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     board = (tmp_path / "res" / "leaderboard.md").read_text()
     assert "`merl`" in board and "`lambert`" in board
     assert "fit time (s)" in board and "evals/s" in board and "bytes" in board
     assert "3 done" in out.stdout
-    again = cli([*QUICK, f"results_dir={tmp_path}/res"], tmp_path)  # the second run, in this process
+    again = cli(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)  # the second run, in this process
     assert again.returncode == 0, again.stderr
     assert "0 done, 3 already in the store" in again.stdout
 
 
-def test_explicit_multirun_sweep(tmp_path, brdfbench):
-    out = brdfbench("-m", "representation=lambert,merl_trilinear", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
+def test_explicit_multirun_sweep(tmp_path, cli):
+    out = cli("-m", "representation=lambert,merl_trilinear", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     board = (tmp_path / "res" / "leaderboard.md").read_text()
     assert "`merl_trilinear`" in board and "`lambert`" in board and "`merl`" not in board
 
 
-def test_render_sweep_with_the_multirun_flag_among_the_overrides(tmp_path, brdfbench):
+def test_render_sweep_with_the_multirun_flag_among_the_overrides(tmp_path, cli):
     """The issue's command shape: `-m` after other overrides, image metrics per material."""
-    out = brdfbench("harness=render", "scene=sphere_envmap", "-m", "representation=merl,lambert",
+    out = cli("harness=render", "scene=sphere_envmap", "-m", "representation=merl,lambert",
                     "dataset.params.size=small", "limit=1", "scene.params.width=16", "scene.params.height=16",
                     "scene.params.spp=4", "harness.sampler=ggx", "harness.sampler_params.alpha=0.3",
                     f"results_dir={tmp_path}/res", cwd=tmp_path)
@@ -52,105 +46,105 @@ def test_render_sweep_with_the_multirun_flag_among_the_overrides(tmp_path, brdfb
     assert len(list((tmp_path / "res" / "renders").rglob("*.exr"))) == 3  # reference, merl, lambert
 
 
-def test_list_prints_one_line_per_plugin(tmp_path, brdfbench):
-    out = brdfbench("list", cwd=tmp_path)
+def test_list_prints_one_line_per_plugin(tmp_path, cli):
+    out = cli("list", cwd=tmp_path)
     assert out.returncode == 0
     lines = out.stdout.splitlines()
     assert any(line.split()[:2] == ["representations", "lambert"] for line in lines)
     assert any(line.split()[:2] == ["datasets", "synthetic"] for line in lines)
 
 
-def test_unknown_config_key_names_the_key(tmp_path, brdfbench):
-    out = brdfbench("bogus_key=1", f"results_dir={tmp_path}/res", cwd=tmp_path)
+def test_unknown_config_key_names_the_key(tmp_path, cli):
+    out = cli("bogus_key=1", f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode != 0
     assert "bogus_key" in out.stderr
     assert not (tmp_path / "res").exists()
 
 
-def test_unknown_harness_key_names_the_key(tmp_path, brdfbench):
-    out = brdfbench("+harness.n_randm=5", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
+def test_unknown_harness_key_names_the_key(tmp_path, cli):
+    out = cli("+harness.n_randm=5", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 2
     assert "harness.n_randm" in out.stderr
     assert not (tmp_path / "res" / "brdfbench.sqlite").exists()
 
 
-def test_unknown_representation_gets_did_you_mean(tmp_path, brdfbench):
-    out = brdfbench("representation.name=lambret", "hydra.mode=RUN", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
+def test_unknown_representation_gets_did_you_mean(tmp_path, cli):
+    out = cli("representation.name=lambret", "hydra.mode=RUN", *QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 2
     assert "Did you mean 'lambert'" in out.stderr
     assert not (tmp_path / "res" / "leaderboard.md").exists()
 
 
-def test_unknown_config_option_lists_choices(tmp_path, brdfbench):
-    out = brdfbench("representation=lambret", f"results_dir={tmp_path}/res", cwd=tmp_path)
+def test_unknown_config_option_lists_choices(tmp_path, cli):
+    out = cli("representation=lambret", f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode != 0
     assert "lambret" in out.stderr and "lambert" in out.stderr
 
 
-def test_merl_folder_that_is_not_a_merl_folder(tmp_path, brdfbench):
+def test_merl_folder_that_is_not_a_merl_folder(tmp_path, cli):
     (tmp_path / "notmerl").mkdir()
     (tmp_path / "notmerl" / "readme.txt").write_text("hello")
-    out = brdfbench("dataset=merl_folder", f"dataset.params.path={tmp_path}/notmerl", "hydra.mode=RUN",
+    out = cli("dataset=merl_folder", f"dataset.params.path={tmp_path}/notmerl", "hydra.mode=RUN",
                     f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 2
     assert "notmerl" in out.stderr
     assert not (tmp_path / "res" / "leaderboard.md").exists()
 
 
-def test_truncated_merl_file_is_named(tmp_path, brdfbench):
+def test_truncated_merl_file_is_named(tmp_path, cli):
     folder = tmp_path / "merl"
     folder.mkdir()
     (folder / "broken.binary").write_bytes(b"\x5a\x00\x00\x00" * 3 + b"\x00" * 100)
-    out = brdfbench("dataset=merl_folder", f"dataset.params.path={folder}", "hydra.mode=RUN",
+    out = cli("dataset=merl_folder", f"dataset.params.path={folder}", "hydra.mode=RUN",
                     f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 2
     assert "broken.binary" in out.stderr and "truncated" in out.stderr
     assert not (tmp_path / "res" / "leaderboard.md").exists()
 
 
-def test_inspect_refuses_a_pickle(tmp_path, brdfbench):
+def test_inspect_refuses_a_pickle(tmp_path, cli):
     path = tmp_path / "model.safetensors"
     path.write_bytes(pickle.dumps({"weights": [1, 2, 3]}))
-    out = brdfbench("inspect", str(path), cwd=tmp_path)
+    out = cli("inspect", str(path), cwd=tmp_path)
     assert out.returncode == 2
     assert str(path) in out.stderr and "pickle" in out.stderr
 
 
-def test_report_without_store_is_an_error(tmp_path, brdfbench):
-    out = brdfbench("report", "--results", str(tmp_path / "nothing"), cwd=tmp_path)
+def test_report_without_store_is_an_error(tmp_path, cli):
+    out = cli("report", "--results", str(tmp_path / "nothing"), cwd=tmp_path)
     assert out.returncode == 2
     assert "no results store" in out.stderr
 
 
 @pytest.mark.slow
 def test_default_benchmark_full_size(tmp_path, cli_process):
-    out = cli_process([f"results_dir={tmp_path}/res"], tmp_path)
+    out = cli_process(f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
 
 
-def test_inspect_shows_params_and_fit_metadata(tmp_path, brdfbench, fitted):
+def test_inspect_shows_params_and_fit_metadata(tmp_path, cli, fitted):
     from brdfbench import modelio
 
     model = fitted("ggx")
     path = modelio.save(model, "ggx", tmp_path / "ggx.safetensors")
-    out = brdfbench("inspect", str(path), cwd=tmp_path)
+    out = cli("inspect", str(path), cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "representation 'ggx'" in out.stdout and "FLOP/eval" in out.stdout
     assert f"fit_loss: {model.fit_loss}" in out.stdout
 
 
-def test_version_prints_the_brdfbench_version(tmp_path, brdfbench):
+def test_version_prints_the_brdfbench_version(tmp_path, cli):
     from brdfbench import __version__
 
-    out = brdfbench("--version", cwd=tmp_path)
+    out = cli("--version", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == f"brdfbench {__version__}"
 
 
-def test_help_lists_subcommands_config_groups_and_their_options(tmp_path, brdfbench):
+def test_help_lists_subcommands_config_groups_and_their_options(tmp_path, cli):
     from importlib import resources
 
-    out = brdfbench("--help", cwd=tmp_path)
+    out = cli("--help", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     for command in ("list", "report", "check", "inspect", "convert"):
         assert f"\n    {command} " in out.stdout, command
@@ -163,8 +157,8 @@ def test_help_lists_subcommands_config_groups_and_their_options(tmp_path, brdfbe
     assert not (tmp_path / "results").exists()
 
 
-def test_hydra_help_stays_reachable(tmp_path, brdfbench):
-    out = brdfbench("--hydra-help", cwd=tmp_path)
+def test_hydra_help_stays_reachable(tmp_path, cli):
+    out = cli("--hydra-help", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "Hydra" in out.stdout and "--multirun" in out.stdout
 
@@ -181,11 +175,11 @@ def test_list_into_a_closed_pipe_ends_without_a_traceback(tmp_path):
 
 
 @pytest.mark.shared_data
-def test_cli_fits_nbrdf_on_the_release(tmp_path, brdfbench, nbrdf_release_dir):
+def test_cli_fits_nbrdf_on_the_release(tmp_path, cli, nbrdf_release_dir):
     """`brdfbench representation=nbrdf dataset=nbrdf_release`, cut down: two materials, a short recipe."""
     args = ["representation=nbrdf", "dataset=nbrdf_release", "limit=2", "harness=quick", f"results_dir={tmp_path}/res",
             "representation.params.epochs=2", "representation.params.n_samples=50000"]
-    out = brdfbench(*args, cwd=tmp_path)
+    out = cli(*args, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     board = (tmp_path / "res" / "leaderboard.md").read_text()
     assert "## Dataset `nbrdf_release`" in board and "`nbrdf`" in board
@@ -194,14 +188,14 @@ def test_cli_fits_nbrdf_on_the_release(tmp_path, brdfbench, nbrdf_release_dir):
     assert set(df[df.metric == "fit_batch"].value) == {2.0}
 
 
-def test_merge_combines_results_folders_into_one_leaderboard(tmp_path, brdfbench):
+def test_merge_combines_results_folders_into_one_leaderboard(tmp_path, cli):
     """Two folders written apart (as two nodes would) merge into one store and leaderboard;
     merging again adds nothing; a missing source fails before anything is written."""
     for rep, folder in (("lambert", "node1"), ("merl", "node2")):
-        out = brdfbench(f"representation={rep}", *QUICK[:2], "limit=2", f"results_dir={tmp_path / folder}",
+        out = cli(f"representation={rep}", *QUICK[:2], "limit=2", f"results_dir={tmp_path / folder}",
                         cwd=tmp_path)
         assert out.returncode == 0, out.stderr
-    out = brdfbench("merge", str(tmp_path / "node1"), str(tmp_path / "node2"), "--into", str(tmp_path / "all"),
+    out = cli("merge", str(tmp_path / "node1"), str(tmp_path / "node2"), "--into", str(tmp_path / "all"),
                     cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "2 cells merged, 0 already in" in out.stdout
@@ -209,12 +203,12 @@ def test_merge_combines_results_folders_into_one_leaderboard(tmp_path, brdfbench
     assert "`lambert`" in board and "`merl`" in board
     df = ResultsStore(tmp_path / "all" / "brdfbench.sqlite").frame()
     assert df.groupby(["representation", "material", "metric"]).size().max() == 1 and len(df.material.unique()) == 2
-    again = brdfbench("merge", str(tmp_path / "node1"), "--into", str(tmp_path / "all"), cwd=tmp_path)
+    again = cli("merge", str(tmp_path / "node1"), "--into", str(tmp_path / "all"), cwd=tmp_path)
     assert again.returncode == 0 and "0 cells merged, 2 already in" in again.stdout
     assert len(ResultsStore(tmp_path / "all" / "brdfbench.sqlite").frame()) == len(df)
-    missing = brdfbench("merge", str(tmp_path / "node1"), str(tmp_path / "gone"), "--into", str(tmp_path / "new"),
+    missing = cli("merge", str(tmp_path / "node1"), str(tmp_path / "gone"), "--into", str(tmp_path / "new"),
                         cwd=tmp_path)
     assert missing.returncode == 2 and f"{tmp_path / 'gone'}/brdfbench.sqlite: no results store here" in missing.stderr
     assert not (tmp_path / "new").exists() and not (tmp_path / "gone").exists()
-    itself = brdfbench("merge", str(tmp_path / "node1"), "--into", str(tmp_path / "node1"), cwd=tmp_path)
+    itself = cli("merge", str(tmp_path / "node1"), "--into", str(tmp_path / "node1"), cwd=tmp_path)
     assert itself.returncode == 2 and "cannot be merged into itself" in itself.stderr

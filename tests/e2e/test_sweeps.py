@@ -17,22 +17,15 @@ from brdfbench.store import ResultsStore
 SMALL = ["dataset.params.size=small", "harness=quick", "progress=lines"]
 
 
-@pytest.fixture
-def _cli(cli):
-    """The command in this process (`brdfbench.cli.main`); the tests that kill a sweep or run
-    two at once start real processes."""
-    return lambda *args, cwd: cli(args, cwd)
-
-
-def test_a_bad_override_in_any_job_fails_before_any_work(tmp_path, _cli):
+def test_a_bad_override_in_any_job_fails_before_any_work(tmp_path, cli):
     res = tmp_path / "res"
-    out = _cli("-m", "representation=lambert,merl", "representation.params.mode=cubic", *SMALL, "limit=1",
+    out = cli("-m", "representation=lambert,merl", "representation.params.mode=cubic", *SMALL, "limit=1",
                f"results_dir={res}", cwd=tmp_path)
     assert out.returncode == 2, out.stdout + out.stderr
     assert "job 0" in out.stderr and "'cubic'" in out.stderr and "nothing was run" in out.stderr
     assert not (res / "brdfbench.sqlite").exists()
 
-    out = _cli("-m", "representation=lambert,lambret", *SMALL, "limit=1", f"results_dir={res}", cwd=tmp_path)
+    out = cli("-m", "representation=lambert,lambret", *SMALL, "limit=1", f"results_dir={res}", cwd=tmp_path)
     assert out.returncode == 2
     assert "job 1" in out.stderr and "lambret" in out.stderr
     assert not (res / "brdfbench.sqlite").exists()
@@ -66,16 +59,16 @@ def test_bad_values_are_named_with_what_they_take(tmp_path, override, match):
     assert match in str(err.value)
 
 
-def test_a_bad_value_exits_2_with_one_line(tmp_path, _cli):
-    out = _cli("representation=lambert", *SMALL, f"results_dir={tmp_path / 'res'}", "harness.timeout_s=abc", cwd=tmp_path)
+def test_a_bad_value_exits_2_with_one_line(tmp_path, cli):
+    out = cli("representation=lambert", *SMALL, f"results_dir={tmp_path / 'res'}", "harness.timeout_s=abc", cwd=tmp_path)
     assert out.returncode == 2, out.stdout + out.stderr
     assert "harness.timeout_s='abc' must be a number" in out.stderr and "Traceback" not in out.stderr
     assert not (tmp_path / "res" / "brdfbench.sqlite").exists()
 
 
-def test_a_sweep_with_failed_cells_finishes_and_exits_non_zero(tmp_path, _cli):
+def test_a_sweep_with_failed_cells_finishes_and_exits_non_zero(tmp_path, cli):
     res = tmp_path / "res"
-    out = _cli("-m", "representation=ggx,lambert", "harness.timeout_s=0.001", *SMALL, "limit=1",
+    out = cli("-m", "representation=ggx,lambert", "harness.timeout_s=0.001", *SMALL, "limit=1",
                f"results_dir={res}", cwd=tmp_path)
     assert out.returncode == 1, out.stdout + out.stderr
     df = ResultsStore(res / "brdfbench.sqlite").frame()
@@ -105,7 +98,7 @@ def _gone(pid: int) -> bool:
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
-def test_a_killed_sweep_resumes_and_recomputes_nothing(tmp_path, _cli):
+def test_a_killed_sweep_resumes_and_recomputes_nothing(tmp_path, cli):
     res = tmp_path / "res"
     args = [sys.executable, "-m", "brdfbench.cli", "representation=lambert", *SMALL, f"results_dir={res}"]
     proc = subprocess.Popen(args, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -132,7 +125,7 @@ def test_a_killed_sweep_resumes_and_recomputes_nothing(tmp_path, _cli):
     before = ResultsStore(db).frame()
     finished = set(before[before.status == "ok"].material)
 
-    out = _cli("representation=lambert", *SMALL, f"results_dir={res}", cwd=tmp_path)
+    out = cli("representation=lambert", *SMALL, f"results_dir={res}", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert f"{len(finished)} already in the store" in out.stdout
     after = ResultsStore(db).frame()

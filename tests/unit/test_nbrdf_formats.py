@@ -594,19 +594,13 @@ def test_weights_that_require_grad_are_written(tmp_path):
 # --------------------------------------------------------------------------- the convert command
 
 
-@pytest.fixture
-def brdfbench(cli):
-    """The command in this process (`brdfbench.cli.main`)."""
-    return lambda *args, cwd: cli(args, cwd)
-
-
-def test_convert_chain_is_byte_identical(tmp_path, brdfbench):
+def test_convert_chain_is_byte_identical(tmp_path, cli):
     """h5 → npy → pt → safetensors → npy: both .npy files have the same bytes."""
     src = tmp_path / "mat.h5"
     write_h5(src, random_weights(40))
     first, pt, model, second = (tmp_path / n for n in ("a.npy", "b.pt", "c.safetensors", "d.npy"))
     for a, b in [(src, first), (first, pt), (pt, model), (model, second)]:
-        out = brdfbench("convert", a, b, cwd=tmp_path)
+        out = cli("convert", a, b, cwd=tmp_path)
         assert out.returncode == 0, out.stderr
         assert str(b) in out.stdout and "6-21-21-3" in out.stdout
     assert first.read_bytes() == second.read_bytes()
@@ -615,27 +609,27 @@ def test_convert_chain_is_byte_identical(tmp_path, brdfbench):
     assert modelio.load(model)[0] == "nbrdf"
 
 
-def _convert_vector(brdfbench, tmp_path, weights, dest_name, *flags):
+def _convert_vector(cli, tmp_path, weights, dest_name, *flags):
     """Write `weights` as a .npy vector and convert it to `dest_name`; the command must succeed."""
     src, dest = tmp_path / "v.npy", tmp_path / dest_name
     np.save(src, nf.flatten(weights))
-    out = brdfbench("convert", src, dest, *flags, cwd=tmp_path)
+    out = cli("convert", src, dest, *flags, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     return dest, out
 
 
-def test_convert_with_hidden_sizes(tmp_path, brdfbench):
+def test_convert_with_hidden_sizes(tmp_path, cli):
     weights = torch_weights(41, (16, 16))
-    dest, out = _convert_vector(brdfbench, tmp_path, weights, "v.pt", "--hidden", "16", "16")
+    dest, out = _convert_vector(cli, tmp_path, weights, "v.pt", "--hidden", "16", "16")
     assert "6-16-16-3" in out.stdout
     state = torch.load(dest, weights_only=True)
     assert state["fc1.weight"].shape == (16, 6)
     assert_same_weights(nf.read_network(dest).weights, weights)
 
 
-def test_convert_raw_units_and_features_reach_the_model_file(tmp_path, brdfbench):
+def test_convert_raw_units_and_features_reach_the_model_file(tmp_path, cli):
     weights = torch_weights(42)
-    dest, out = _convert_vector(brdfbench, tmp_path, weights, "m.safetensors", "--raw-units", "--features", "directions")
+    dest, out = _convert_vector(cli, tmp_path, weights, "m.safetensors", "--raw-units", "--features", "directions")
     assert "raw MERL units" in out.stdout
     name, model = modelio.load(dest)
     assert name == "naive_mlp" and model.params["raw_units"] is True
@@ -647,18 +641,18 @@ TRAINING_PARAMS = ("epochs", "batch_size", "lr", "schedule", "n_samples", "outpu
                    "batch_materials", "init")
 
 
-def test_a_converted_network_records_only_what_is_true_of_it(tmp_path, brdfbench):
+def test_a_converted_network_records_only_what_is_true_of_it(tmp_path, cli):
     """`convert X.h5 Y.safetensors` trains nothing: the model file holds the architecture
     and units (params), the encoding and the source (metadata), and `inspect` shows no
     training parameter or fit result."""
     src, dest = tmp_path / "mat.h5", tmp_path / "mat.safetensors"
     write_h5(src, random_weights(43))
-    assert brdfbench("convert", src, dest, cwd=tmp_path).returncode == 0
+    assert cli("convert", src, dest, cwd=tmp_path).returncode == 0
     name, model = modelio.load(dest)
     assert name == "nbrdf"
     assert model.params == {"hidden": [21, 21], "raw_units": False}
     assert model.metadata() == {"source": str(src), "features": "rusinkiewicz"}
-    out = brdfbench("inspect", dest, cwd=tmp_path)
+    out = cli("inspect", dest, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     assert "'hidden': [21, 21]" in out.stdout and "'raw_units': False" in out.stdout
     assert f"source: {src}" in out.stdout and "features: rusinkiewicz" in out.stdout
@@ -679,7 +673,7 @@ def test_a_converted_model_converts_again_with_its_own_record(tmp_path):
     assert model.metadata() == {"source": str(first), "features": "directions"}
 
 
-def test_an_h5_with_an_extra_layer_is_refused_by_convert(tmp_path, brdfbench):
+def test_an_h5_with_an_extra_layer_is_refused_by_convert(tmp_path, cli):
     src, dest = tmp_path / "deeper.h5", tmp_path / "out.npy"
     write_h5(src, random_weights(46))
     with h5py.File(src, "a") as f:
@@ -687,7 +681,7 @@ def test_an_h5_with_an_extra_layer_is_refused_by_convert(tmp_path, brdfbench):
         f.create_dataset("dense_4/dense_4/bias:0", data=np.zeros(3, np.float32))
     with pytest.raises(ModelFileError, match=r"deeper\.h5.*'dense_4/dense_4/bias:0'.*layer 'dense_4'"):
         nf.read_network(src)
-    out = brdfbench("convert", src, dest, cwd=tmp_path)
+    out = cli("convert", src, dest, cwd=tmp_path)
     assert out.returncode == 2 and str(src) in out.stderr and "dense_4" in out.stderr
     assert not dest.exists()
 
@@ -713,10 +707,10 @@ def _pickle_source(tmp_path):
 
 @pytest.mark.parametrize("setup", [_wrong_length, _h5_destination, _pickle_source],
                          ids=["wrong-length-npy", "h5-destination", "pickle-source"])
-def test_convert_errors_exit_2_naming_the_file(tmp_path, setup, brdfbench):
+def test_convert_errors_exit_2_naming_the_file(tmp_path, setup, cli):
     src, dest, named = setup(tmp_path)
     before = sorted(p.name for p in tmp_path.iterdir())
-    out = brdfbench("convert", src, dest, cwd=tmp_path)
+    out = cli("convert", src, dest, cwd=tmp_path)
     assert out.returncode == 2, (out.stdout, out.stderr)
     assert str(named) in out.stderr and "Traceback" not in out.stderr
     assert not dest.exists()
