@@ -11,6 +11,10 @@ rounding of a pole it is as arbitrary as the rounding (e.g. φd for ωi = ωo). 
 ωi + ωo = 0 exactly is the half vector undefined: `half_vector` then picks the unit
 vector ⊥ ωi nearest the normal.
 
+MERL cells do not come from these angles: the reference reader's are less accurate (acos
+near the poles) and its φd keeps atan2's sign, which [0, 2π) loses at φd = ±π (its −π
+folds into cell 0, +π into 179), so brdfbench.merl follows the reader's own arithmetic.
+
 Conditioning (what any method working on rounded unit vectors can achieve, u = unit
 roundoff of the dtype): directions → angles → directions is accurate to a few u
 everywhere. Angles → directions → angles is accurate to a few u in θh, θd, and in φh, φd

@@ -31,17 +31,21 @@ the MERL cell lookup and the table kernels (`MerlTableKernel`, `MerlTrilinearKer
 plugin package, as a third party's would. Kernels are used in JIT variants (llvm_*,
 cuda_*) only; scalar variants take the torch path.
 
-MERL tables are looked up in the reference's cells. `merl_cell` finds them in fp32 (no
-division but three in its arctangents, scale-invariant forms that need no normalisation)
-and measures how far each continuous cell coordinate lies from a cell edge; a lane within
-`MERL_EDGE_TOL` cells of one (about 10x the fp32 path's worst error, measured over 10⁷
-adversarial and random pairs) or in an ill-conditioned configuration takes a symbolic branch
-that recomputes the cells in fp64 as brdfbench.merl does (`merl_indices`). The branch runs
-for ~0.3 % of a renderer's lanes and costs about 5 % of a render; with the packet gather
-below, the sphere benchmark renders 1.5x faster than with fp64 cells everywhere. drjit's
-fp64 atan2 and hypot may still differ from torch's in the last bit, which moves a pair
-only within ~1e-16 rad of a cell edge, or where the reference's own angle is rounding
-noise (φd at ωi = ωo exactly, where it is undefined).
+MERL tables are looked up in the reference reader's cells. `merl_cell` finds them in fp32
+(no division but three in its arctangents, scale-invariant forms that need no
+normalisation) and measures how far each continuous cell coordinate lies from a cell edge;
+a lane within `MERL_EDGE_TOL` cells of one (about 10x the fp32 path's worst error, measured
+over 10⁷ adversarial and random pairs) or in an ill-conditioned configuration takes a
+symbolic branch that recomputes the cells in fp64 with the reader's own operations, as
+brdfbench.merl does (`merl_indices`). The branch runs for ~0.3 % of a renderer's lanes and
+costs about 5 % of a render; with the packet gather below, the sphere benchmark renders
+1.5x faster than with fp64 cells everywhere. drjit's fp64 sin, cos, acos and atan2 are its
+own, not the C library's that brdfbench.merl and the reader call: their last bits differ
+for a fifth to two fifths of arguments, which moves a pair only within ~1e-13 cells of a
+cell edge or where the reader's own angle is rounding noise (φd at ωi = ωo). Pairs that
+sit exactly on an edge by symmetry, which fp32 directions keep (ωo = the normal: φd on
+the 0 ≡ π fold; both directions in one plane with the normal), are such pairs: about a
+third of θo = 0 pairs take the other side of the fold.
 """
 
 from __future__ import annotations
@@ -177,8 +181,9 @@ def spherical(v):
 
 
 def merl_coordinates64(wi: mi.Vector3f, wo: mi.Vector3f):
-    """Continuous (θh, θd, φd) cell coordinates (mi.Float64) whose integer parts are the
-    reference's cells, and θh, computed in fp64 operation by operation as brdfbench.merl."""
+    """Continuous (θh, θd, φd) cell coordinates (mi.Float64) and θh, computed in fp64
+    operation by operation as brdfbench.merl.continuous_indices (coords' angles): the
+    trilinear kernel's fp64 branch. The nearest cells come from `merl_indices`."""
     wi, wo = mi.Vector3d(wi), mi.Vector3d(wo)
     h = half_vector(wi, wo)
     rho_h = dr.hypot(h.x, h.y)
@@ -196,14 +201,57 @@ def merl_coordinates64(wi: mi.Vector3f, wo: mi.Vector3f):
     return u_h, u_d, u_p, theta_h
 
 
+def c_atan2(y, x):
+    """atan2 with C's signed zeros: drjit's own gives +0 for atan2(±0, ±0) and +π for
+    atan2(−0, x < 0), where C gives ±0 or ±π by the signs (and so the reader's φd cell)."""
+    on_axis = dr.copysign(dr.select(dr.copysign(1.0, x) < 0, math.pi, 0.0), y)
+    return dr.select(y == 0, on_axis, dr.atan2(y, x))
+
+
+def _rotated(v, axis, angle):
+    """Rodrigues' rotation as the MERL reader accumulates it (see brdfbench.merl); `axis`
+    has opaque components, so that its zeros are multiplied through as in the reader
+    (drjit folds a product with a literal 0 to +0, losing the sign of zero)."""
+    c, s = dr.cos(angle), dr.sin(angle)
+    k = (axis.x * v.x + axis.y * v.y + axis.z * v.z) * (1.0 - c)
+    w = _cross(axis, v)
+    return type(v)(v.x * c + axis.x * k + w.x * s, v.y * c + axis.y * k + w.y * s, v.z * c + axis.z * k + w.z * s)
+
+
+def merl_reader_angles64(wi: mi.Vector3f, wo: mi.Vector3f):
+    """(θh, θd, φd) in fp64, operation by operation as the MERL reader (brdfbench.merl's
+    `reader_angles`), φd in [−π, π]. drjit's fp64 sin, cos, acos and atan2 are not the C
+    library's (their last bits differ for a fifth to two fifths of arguments), so where the
+    reader's cell hangs on those bits this may pick the other one."""
+    wi, wo = mi.Vector3d(wi), mi.Vector3d(wo)
+
+    def normalized(v):
+        return div(v, dr.sqrt(v.x * v.x + v.y * v.y + v.z * v.z))
+
+    zero, one = dr.opaque(mi.Float64, 0.0), dr.opaque(mi.Float64, 1.0)
+    half = normalized((wi + wo) / 2.0)
+    theta_h = dr.acos(half.z)
+    phi_h = c_atan2(half.y, half.x)
+    temp = _rotated(normalized(wi), mi.Vector3d(zero, zero, one), -phi_h)
+    diff = _rotated(temp, mi.Vector3d(zero, one, zero), -theta_h)
+    return theta_h, dr.acos(diff.z), c_atan2(diff.y, diff.x)
+
+
 def merl_indices(wi: mi.Vector3f, wo: mi.Vector3f):
-    """(θh, θd, φd) cell indices (mi.Int32) of direction pairs, computed in fp64 operation
-    by operation as brdfbench.merl.cell_indices."""
-    u_h, u_d, u_p, theta_h = merl_coordinates64(wi, wo)
-    ih = dr.select(theta_h <= 0, 0, dr.clip(mi.Int32(u_h), 0, merl.RES_THETA_H - 1))
-    id_ = dr.clip(mi.Int32(u_d), 0, merl.RES_THETA_D - 1)
-    ip = dr.clip(mi.Int32(u_p), 0, merl.RES_PHI_D - 1)
-    return ih, id_, ip
+    """(θh, θd, φd) cell indices (mi.Int32) of direction pairs as the MERL reader finds
+    them, in fp64 (`merl_reader_angles64`); NaN angles give cell 0, as its casts do."""
+    theta_h, theta_d, phi_d = merl_reader_angles64(wi, wo)
+    # Divisors are opaque: drjit turns a division by a literal into a product with its
+    # reciprocal, which rounds differently from the reader's division.
+    half_pi, pi = dr.opaque(mi.Float64, math.pi / 2.0), dr.opaque(mi.Float64, math.pi)
+    u_h = dr.sqrt(dr.select(theta_h > 0, theta_h, 0.0) / half_pi * merl.RES_THETA_H * merl.RES_THETA_H)
+    u_d = theta_d / half_pi * merl.RES_THETA_D
+    u_p = dr.select(phi_d < 0, phi_d + pi, phi_d) / pi * (2 * merl.RES_PHI_D) / 2
+
+    def index(u, n):
+        return dr.clip(mi.Int32(dr.select(u >= 0, u, 0.0)), 0, n - 1)  # NaN fails u >= 0
+
+    return index(u_h, merl.RES_THETA_H), index(u_d, merl.RES_THETA_D), index(u_p, merl.RES_PHI_D)
 
 
 #: Distance (in cells) from a cell edge below which `merl_cell` recomputes a lane in fp64:
@@ -252,15 +300,15 @@ def merl_coordinates(wi: mi.Vector3f, wo: mi.Vector3f):
     the (θh, θd, φd) indices, plus sin²θd and cos θd up to a common positive scale (φd's
     conditioning) and a mask of the pairs the fp32 forms handle (`well_posed`).
 
-    h is the reference's (ωi + ωo, or its part ⊥ ωi − ωo for nearly opposite pairs), left
-    unnormalised: every angle comes from atan2 of two quantities with the same scale. ωi in
-    h's frame is (dx, dy, dz)/(ρ|h|) with ρ = |h_xy|; φd ∈ [0, π] is folded as the reference
-    folds it. Not well posed: |ωi + ωo| < 0.1, θh = 0 or θd = 0 (φh or φd undefined).
+    h is the reader's, ωi + ωo as given (not normalised first), left unnormalised: every
+    angle comes from atan2 of two quantities with the same scale. ωi in h's frame is
+    (dx, dy, dz)/(ρ|h|) with ρ = |h_xy|; φd ∈ [0, π] is folded as the reader folds it. Not
+    well posed: |ωi + ωo| < 0.1, and sin θh or sin θh sin θd below 1e-7, where the reader's
+    acos of a z near 1 is off by up to 2e-16/sin θ rad (and φh, φd are undefined at 0).
     """
     s = wi + wo
-    dif = wi - wo
     sum2 = _dot(s, s)
-    v = dr.select(_dot(dif, dif) > sum2, _cross(dif, _cross(s, dif)), s)
+    v = s  # the reader's h, unnormalised
     rho2 = v.x * v.x + v.y * v.y
     norm2 = rho2 + v.z * v.z
     rho, norm = dr.sqrt(rho2), dr.sqrt(norm2)
@@ -277,7 +325,7 @@ def merl_coordinates(wi: mi.Vector3f, wo: mi.Vector3f):
     u_h = dr.sqrt(theta_h * (merl.RES_THETA_H * merl.RES_THETA_H / (0.5 * math.pi)))
     u_d = theta_d * (merl.RES_THETA_D / (0.5 * math.pi))
     u_p = phi_d * (merl.RES_PHI_D / math.pi)
-    well_posed = (sum2 >= MERL_MIN_SUM2) & (rho2 > 1e-20 * norm2) & (sin2 > 1e-20 * norm2 * norm2)
+    well_posed = (sum2 >= MERL_MIN_SUM2) & (rho2 > 1e-14 * norm2) & (sin2 > 1e-14 * norm2 * norm2)
     return u_h, u_d, u_p, sin2, dz, well_posed
 
 

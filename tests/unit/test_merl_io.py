@@ -1,13 +1,11 @@
 """MERL `.binary` I/O, validation and lookup against the reference reader (BRDFRead.cpp).
 
 `merl_reference.py` is a scalar float64 port of the reader's lookup; `lookup_nearest` must
-return bitwise the same values. The reference's own cell choice is decided by rounding
-noise in a few places — φd on the 0 ≡ π fold for pairs in one plane with the normal, φd
-on the 90° edge for pairs with equal polar angles (θi = θo gives φd = ±π/2 exactly), φd
-when θd or θh is zero only up to rounding (ωi = ωo, h = normal + noise), and angles that
-sit exactly on a cell edge (different but equally valid rounding sequences, or another
-build of the reader, pick either side). There the tests check what is determined: the
-θh and θd cells, and the φd cell up to the neighbouring one.
+return bitwise the same values, cell edges and degenerate pairs included: the lookup runs
+the reader's own operations, so even where the reader's cell is decided by rounding noise
+(φd on the 0 ≡ π fold for pairs in one plane with the normal, φd on the 90° edge for pairs
+with equal polar angles, φd at ωi = ωo, angles exactly on a cell edge) it is the same
+noise. The adversarial sets and the property test are in test_merl_reference_agreement.py.
 """
 
 from __future__ import annotations
@@ -90,12 +88,12 @@ def unit_pairs_from_angles(th, ph, td, pd):
 
 
 def random_pairs(rng, n, max_theta=HALF_PI):
-    """Pairs built the reader's way, from spherical angles (cosine-uniform polar angles)."""
+    """Pairs built the reader's way, its two vectors from spherical angles (cosine-uniform polar angles)."""
     ti = np.arccos(rng.uniform(math.cos(max_theta), 1.0, n))
     to = np.arccos(rng.uniform(math.cos(max_theta), 1.0, n))
     pi_, po = rng.uniform(-math.pi, math.pi, (2, n))
     pairs = [
-        (ref.direction_from_angles(float(a), float(b)), ref.direction_from_angles(float(c), float(d)))
+        (ref.reader_vector(float(a), float(b)), ref.reader_vector(float(c), float(d)))
         for a, b, c, d in zip(ti, pi_, to, po)
     ]
     return [(a, b) for a, b in pairs if a[2] > 0 and b[2] > 0]
@@ -116,16 +114,27 @@ def test_nearest_matches_reference_random(table, raw):
 
 
 def test_nearest_matches_reference_angle_entry_point(table, raw):
-    """lookup_brdf_val(θi, φi, θo, φo), the reader's own signature, on the same vectors."""
+    """lookup_brdf_val(θi, φi, θo, φo), the reader's own signature: `lookup_angles` at the
+    angles, and `lookup` at the two vectors the reader builds from them, bitwise."""
     rng = np.random.default_rng(2)
     n = 1000
     ti, to = rng.uniform(0, math.radians(89.99), (2, n))
     pi_, po = rng.uniform(-math.pi, math.pi, (2, n))
     flat = raw.reshape(-1)
     want = np.array([ref.lookup_brdf_val(flat, *map(float, x)) for x in zip(ti, pi_, to, po)])
-    pairs = [(ref.direction_from_angles(float(a), float(b)), ref.direction_from_angles(float(c), float(d))) for a, b, c, d in zip(ti, pi_, to, po)]
+    got = table.lookup_angles(*(torch.from_numpy(x) for x in (ti, pi_, to, po))).numpy()
+    assert np.array_equal(got.view(np.uint64), want.view(np.uint64))
+    assert np.array_equal(merl.lookup_nearest_angles(table.values, ti, pi_, to, po).numpy(), got)
+    pairs = [(ref.reader_vector(float(a), float(b)), ref.reader_vector(float(c), float(d))) for a, b, c, d in zip(ti, pi_, to, po)]
     got = table.lookup(*as_vectors(pairs)).numpy()
     assert np.array_equal(got.view(np.uint64), want.view(np.uint64))
+    # Angles broadcast; the trilinear mode interpolates at the reader's vectors.
+    one = table.lookup_angles(0.3, torch.tensor([0.1, 0.2]), 0.4, 2.0)
+    assert one.shape == (2, 3) and torch.equal(one[0], table.lookup_angles(0.3, 0.1, 0.4, 2.0)[0])
+    tri = table.lookup_angles(ti[:50], pi_[:50], to[:50], po[:50], mode="trilinear")
+    assert torch.equal(tri, table.lookup(*as_vectors(pairs[:50]), mode="trilinear"))
+    with pytest.raises(ValueError, match="bogus"):
+        table.lookup_angles(0.1, 0.2, 0.3, 0.4, mode="bogus")
 
 
 def test_nearest_matches_reference_specular_and_grazing(table, raw):
@@ -137,29 +146,30 @@ def test_nearest_matches_reference_specular_and_grazing(table, raw):
     assert_bitwise_same(table, raw, pairs)
     # Grazing: one direction at 89.99°, the other anywhere or also grazing (89°..89.99°).
     g = math.radians(89.99)
-    one = [(ref.direction_from_angles(g, float(a)), ref.direction_from_angles(float(t), float(b))) for a, b, t in zip(*rng.uniform(-math.pi, math.pi, (2, n)), rng.uniform(0, g, n))]
-    both = [(ref.direction_from_angles(g, float(a)), ref.direction_from_angles(float(t), float(b))) for a, b, t in zip(*rng.uniform(-math.pi, math.pi, (2, n)), rng.uniform(math.radians(89.0), g, n))]
+    one = [(ref.reader_vector(g, float(a)), ref.reader_vector(float(t), float(b))) for a, b, t in zip(*rng.uniform(-math.pi, math.pi, (2, n)), rng.uniform(0, g, n))]
+    both = [(ref.reader_vector(g, float(a)), ref.reader_vector(float(t), float(b))) for a, b, t in zip(*rng.uniform(-math.pi, math.pi, (2, n)), rng.uniform(math.radians(89.0), g, n))]
     assert_bitwise_same(table, raw, one + both + [(b, a) for a, b in one + both])
 
 
 def test_equal_polar_angles_sit_on_a_cell_edge(table, raw):
     """θi = θo puts φd at exactly ±π/2, the edge between φd cells 89 and 90: the reader's
-    side is decided by rounding, so only the θ cells and the φd cell up to that edge are
-    determined (here at grazing 89.99°, and at 30°)."""
+    side is decided by rounding, and the lookup's is the same (here at grazing 89.99°,
+    and at 30°)."""
     rng = np.random.default_rng(11)
     for theta in (math.radians(89.99), math.radians(30.0)):
-        pairs = [(ref.direction_from_angles(theta, float(a)), ref.direction_from_angles(theta, float(b))) for a, b in rng.uniform(-math.pi, math.pi, (1000, 2))]
+        pairs = [(ref.reader_vector(theta, float(a)), ref.reader_vector(theta, float(b))) for a, b in rng.uniform(-math.pi, math.pi, (1000, 2))]
         pairs = [(a, b) for a, b in pairs if abs(a[0] - b[0]) + abs(a[1] - b[1]) > 1e-3]
         ours, theirs = our_indices(pairs), reference_indices(pairs)
-        assert np.array_equal(ours[:, :2], theirs[:, :2])
-        assert np.isin(ours[:, 2], [89, 90]).all() and np.isin(theirs[:, 2], [89, 90]).all()
+        assert np.array_equal(ours, theirs)
+        assert np.isin(theirs[:, 2], [89, 90]).all() and len(np.unique(theirs[:, 2])) == 2
+        assert_bitwise_same(table, raw, pairs)
 
 
 def test_nearest_matches_reference_theta_h_zero(table, raw):
     """ωo = ωi mirrored about the normal: h is exactly the normal in both, θh index 0."""
     rng = np.random.default_rng(4)
     n = 2000
-    wi = [ref.direction_from_angles(float(t), float(p)) for t, p in zip(rng.uniform(0, math.radians(89.99), n), rng.uniform(-math.pi, math.pi, n))]
+    wi = [ref.reader_vector(float(t), float(p)) for t, p in zip(rng.uniform(0, math.radians(89.99), n), rng.uniform(-math.pi, math.pi, n))]
     wi += [(0.0, 0.0, 1.0)]
     pairs = [(a, (-a[0], -a[1], a[2])) for a in wi]
     assert (our_indices(pairs)[:, 0] == 0).all()
@@ -187,27 +197,23 @@ def test_nearest_matches_reference_near_cell_edges(table, raw):
     assert_bitwise_same(table, raw, pairs)
 
 
-def test_identical_directions(raw):
+def test_identical_directions(table, raw):
     """ωi = ωo: the reader's θd is acos of (1 ± rounding) — 0, a few 1e-8 or NaN (cast to
-    cell 0) — and its φd is the atan2 of rounding residues: undefined. The θh and θd
-    cells must match; with a table whose θd = 0 row does not depend on φd, the values
-    match bitwise."""
+    cell 0) — and its φd is the atan2 of rounding residues: undefined, but the lookup
+    reproduces it, so the cells and values are bitwise the reader's."""
     rng = np.random.default_rng(6)
-    wi = [ref.direction_from_angles(float(t), float(p)) for t, p in zip(rng.uniform(0, math.radians(89.99), 2000), rng.uniform(-math.pi, math.pi, 2000))]
-    wi += [(0.0, 0.0, 1.0), ref.direction_from_angles(math.radians(89.99), 0.3)]
+    wi = [ref.reader_vector(float(t), float(p)) for t, p in zip(rng.uniform(0, math.radians(89.99), 2000), rng.uniform(-math.pi, math.pi, 2000))]
+    wi += [(0.0, 0.0, 1.0), ref.reader_vector(math.radians(89.99), 0.3)]
     pairs = [(a, a) for a in wi]
     ours, theirs = our_indices(pairs), reference_indices(pairs)
-    assert np.array_equal(ours[:, :2], theirs[:, :2])
-    assert (ours[:, 1] == 0).all()
-    flat_phi = raw.copy()
-    flat_phi[:, :, 0, :] = raw[:, :, 0, :1]
-    assert_bitwise_same(merl.MerlTable(flat_phi), flat_phi, pairs)
+    assert np.array_equal(ours, theirs)
+    assert (ours[:, 1] == 0).all() and len(np.unique(ours[:, 2])) > 20  # φd: all over the row
+    assert_bitwise_same(table, raw, pairs)
 
 
-def test_in_plane_pairs_fold_ambiguity():
+def test_in_plane_pairs_fold_ambiguity(table, raw):
     """Pairs in one plane with the normal have φd = 0 ≡ π: the reader puts them in cell 0
-    or 179 by the sign of a rounding residue, so only the θ cells and the φd cell up to
-    that fold (or an adjacent cell) are determined."""
+    or 179 by the sign of a rounding residue (or of a zero), and the lookup follows it."""
     rng = np.random.default_rng(7)
     n = 1500
     t1, t2 = rng.uniform(-math.radians(89.9), math.radians(89.9), (2, n))
@@ -218,9 +224,9 @@ def test_in_plane_pairs_fold_ambiguity():
             c, s = math.cos(phi), math.sin(phi)
             pairs.append(((math.sin(a) * c, math.sin(a) * s, math.cos(a)), (math.sin(b) * c, math.sin(b) * s, math.cos(b))))
     ours, theirs = our_indices(pairs), reference_indices(pairs)
-    assert np.array_equal(ours[:, :2], theirs[:, :2])
-    assert np.isin((ours[:, 2] - theirs[:, 2]) % 180, [0, 1, 179]).all()
-    assert np.isin(ours[:, 2], [0, 179]).all()
+    assert np.array_equal(ours, theirs)
+    assert np.isin(ours[:, 2], [0, 179]).all() and len(np.unique(ours[:, 2])) == 2
+    assert_bitwise_same(table, raw, pairs)
 
 
 def test_index_functions_at_cell_edges():
@@ -241,12 +247,21 @@ def test_index_functions_at_cell_edges():
     got = merl.theta_diff_index(torch.from_numpy(td)).numpy()
     assert np.array_equal(got, [ref.theta_diff_index(float(x)) for x in td])
 
-    # Our φd is in [0, 2π); the reader's atan2 gives [−π, π]: the same angle is φd − 2π above π.
+    # The reader's own φd, atan2's [−π, π] (−π folds to cell 0, +π clamps to 179), and
+    # coords.to_half_diff's [0, 2π), where the same angle is φd − 2π above π.
+    pd = around(np.concatenate([np.arange(-180, 181) / 180.0 * math.pi, np.radians(np.arange(-180.0, 181.0))]))
+    pd = pd[(pd >= -math.pi) & (pd <= math.pi)]
+    got = merl.phi_diff_index(torch.from_numpy(pd)).numpy()
+    assert np.array_equal(got, [ref.phi_diff_index(float(x)) for x in pd])
+    assert merl.phi_diff_index(torch.tensor([-math.pi, math.pi, -0.0, 0.0], dtype=torch.float64)).tolist() == [0, 179, 0, 0]
     pd = around(np.concatenate([np.arange(0, 361) / 180.0 * math.pi, np.radians(np.arange(0.0, 361.0))]))
     pd = pd[(pd >= 0) & (pd < 2 * math.pi)]
     got = merl.phi_diff_index(torch.from_numpy(pd)).numpy()
     want = [ref.phi_diff_index(float(x) if x <= math.pi else float(x) - 2 * math.pi) for x in pd]
     assert np.array_equal(got, want)
+    # NaN (the reader's angles for ωo = −ωi) is cast to cell 0, as C's (int) then clamps it.
+    nan = torch.tensor([math.nan])
+    assert [int(f(nan)) for f in (merl.theta_half_index, merl.theta_diff_index, merl.phi_diff_index)] == [0, 0, 0]
 
 
 # --------------------------------------------------------------------------- the grid and trilinear
