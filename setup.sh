@@ -4,13 +4,20 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 
-# Mitsuba 3's llvm_* variants need LLVM 19 at run time (with LLVM 15/16 drjit aborts).
-if command -v apt-get >/dev/null 2>&1 && ! dpkg -s libllvm19 >/dev/null 2>&1; then
-    sudo=""
-    [ "$(id -u)" -eq 0 ] || sudo="sudo"
-    echo "setup: installing libllvm19 (Debian)"
-    $sudo apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq libllvm19 >/dev/null
+# Debian packages: LLVM 19 for Mitsuba 3's llvm_* variants (with LLVM 15/16 drjit aborts);
+# headless Chromium and its WebDriver for the HTML report's browser test.
+if command -v apt-get >/dev/null 2>&1; then
+    missing=""
+    for pkg in libllvm19 chromium chromium-driver; do
+        dpkg -s "$pkg" >/dev/null 2>&1 || missing="$missing $pkg"
+    done
+    if [ -n "$missing" ]; then
+        sudo=""
+        [ "$(id -u)" -eq 0 ] || sudo="sudo"
+        echo "setup: installing$missing (Debian)"
+        $sudo apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq $missing >/dev/null
+    fi
 fi
 
 PYTHON=${PYTHON:-python3}

@@ -1,36 +1,21 @@
-"""The Markdown leaderboard: accuracy side by side with what it costs."""
+"""The Markdown leaderboard: the report's view (`view.build`) as text, accuracy beside its cost."""
 
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Collection
 
 import pandas as pd
 
 from . import plots as plots_module
-from . import tables
+from . import view
+from .view import Cell, ConvergenceSection, Metric, TableSection
 
-COST_LABELS = {
-    "fit_loss": "own fit loss",
-    "fit_time": "fit time (s) ↓",
-    "fit_batch": "materials per fit",
-    "train_time": "train time (s) ↓",
-    "evals_per_s": "evals/s ↑",
-    "model_bytes": "bytes/material ↓",
-    "shared_bytes": "shared bytes ↓",
-    "flops_per_eval": "FLOP/eval ↓",
-    "render_time": "render time (s) ↓",
-    "render_samples_per_s": "render samples/s ↑",
-    "peak_rss_fit": "peak memory, fit (B) ↓",
-    "peak_rss_eval": "peak memory, eval (B) ↓",
-    "peak_rss_train": "peak memory, train (B) ↓",
-}
 #: Marks a timing measured while other brdfbench jobs ran on the same host.
 CONTENDED = "†"
 
 
-def fmt(value: float) -> str:
+def fmt(value: float | None) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "–"
     if value == 0:
@@ -40,154 +25,139 @@ def fmt(value: float) -> str:
     return f"{value:.4g}"
 
 
-def _arrow(higher_is_better: bool) -> str:
-    return "↑" if higher_is_better else "↓"
-
-
 def _table(header: list[str], rows: list[list[str]]) -> list[str]:
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines += ["| " + " | ".join(r) + " |" for r in rows]
     return lines
 
 
-def dataset_section(name: str, fingerprint: str, df: pd.DataFrame, scene: str = "brdf_space") -> list[str]:
-    summary = tables.summarize(df)
-    n_materials = df["material"].nunique()
-    heading = f"## Dataset `{name}`" + ("" if scene == "brdf_space" else f", rendered scene `{scene}`")
-    lines = [heading, "", f"{n_materials} materials, fingerprint `{fingerprint}`.", ""]
-    if scene != "brdf_space":
+def cell_text(cell: Cell | None, metric: Metric | None = None) -> str:
+    """The cell's figure; an incomplete one as "–" with its partial figure and what is missing."""
+    if cell is None:
+        return "–"
+    mark = CONTENDED if metric is not None and metric.timed and cell.contended else ""
+    if cell.complete:
+        return fmt(cell.value) + mark
+    if cell.partial is None:
+        return "–"
+    return f"– ({fmt(cell.partial)}{mark} over {cell.n}/{cell.expected})"
+
+
+def _interval(cell: Cell | None) -> str:
+    if cell is None or cell.lo is None:
+        return "–"
+    return f"[{fmt(cell.lo)}, {fmt(cell.hi)}]"
+
+
+def _header(metric: Metric) -> str:
+    return f"{metric.label} {metric.arrow}".rstrip()
+
+
+def table_section(s: TableSection) -> list[str]:
+    heading = f"## Dataset `{s.dataset}`" + ("" if s.scene == "brdf_space" else f", rendered scene `{s.scene}`")
+    lines = [heading, "", f"{len(s.materials)} materials, fingerprint `{s.fingerprint}`.", ""]
+    if s.scene != "brdf_space":
         lines += ["> Image metrics compare each representation's render with the render of the material's own "
                   "table (nearest-cell lookup) through the same simulator and random numbers.", ""]
-    caveat = tables.dataset_caveat(name)
-    if caveat:
-        lines += [f"> {caveat}", ""]
-    primary = tables.primary_metric(summary)
-    if primary is None:
-        lines += ["No successful results yet.", ""]
-    else:
-        ranked = tables.ranking(summary, primary)
-        accuracy_metrics = tables.accuracy_metrics(summary)
-        costs = [c for c in tables.COST_METRICS if c in set(summary.metric)]
-        lookup = {(r.representation, r.metric): r for r in summary.itertuples() if r.spp == 0}
-        header = ["rank", "representation"]
-        header += [f"{m} {_arrow(lookup_any(summary, m).higher_is_better)}" for m in accuracy_metrics]
-        header += [COST_LABELS[c] for c in costs] + ["materials"]
-        rows = []
-        for rank, rep in enumerate(ranked["representation"], 1):
-            cells = [str(rank), f"`{rep}`"]
-            cells += [fmt(lookup[(rep, m)].mean) if (rep, m) in lookup else "–" for m in accuracy_metrics]
-            cells += [_cost(lookup.get((rep, c)), c) for c in costs]
-            cells.append(f"{lookup[(rep, primary)].n}/{n_materials}")
-            rows.append(cells)
-        lines += [
-            "### Accuracy and its cost",
-            "",
-            f"Ranked by mean `{primary}` over materials. Accuracy columns are means over materials; fit time is the "
-            "mean per material (amortised over the materials fitted together, for batched fitters), evals/s and "
-            "bytes the median. Representations that train on a split (train time, "
-            "shared bytes) are cross-validated: each material is scored by a model trained without it. "
-            "↓ lower is better, ↑ higher is better.",
-            "",
-            *_table(header, rows),
-            "",
-            *([f"{CONTENDED} measured while other brdfbench jobs ran on the same host: timings are not comparable "
-               "with unmarked ones.", ""] if any(_contended(lookup.get((rep, c)), c) for rep in ranked["representation"]
-                                                  for c in costs) else []),
-            "### Per metric",
-            "",
-        ]
-        for metric in accuracy_metrics:
-            r = tables.ranking(summary, metric)
-            first = r.iloc[0]
-            lines += [f"#### `{metric}` ({first.unit or 'unitless'}, {'higher' if first.higher_is_better else 'lower'} is better)", ""]
-            lines += _table(
-                ["rank", "representation", "mean", "median", "worst", "materials"],
-                [[str(i), f"`{x.representation}`", fmt(x.mean), fmt(x.median), fmt(x.worst), str(x.n)]
-                 for i, x in enumerate(r.itertuples(), 1)],
-            )
-            lines.append("")
-    return lines + _failures(df)
+    if s.caveat:
+        lines += [f"> {s.caveat}", ""]
+    if s.primary is None:
+        return lines + ["No successful results yet.", ""] + _failures(s.failures)
+    header = ["rank", "representation", *[_header(m) for m in s.accuracy], *[_header(m) for m in s.costs], "materials"]
+    rows = []
+    for row in s.rows:
+        cells = [str(row.rank) if row.rank is not None else "–", f"`{row.label}`"]
+        cells += [cell_text(row.cell(m.name), m) for m in [*s.accuracy, *s.costs]]
+        primary = row.cell(s.primary.name)
+        cells.append(f"{primary.n if primary else 0}/{len(s.materials)}")
+        rows.append(cells)
+    lines += [
+        "### Accuracy and its cost",
+        "",
+        f"Ranked by mean `{s.primary.name}` over materials. Accuracy columns are means over materials; fit time is "
+        "the mean per material (amortised over the materials fitted together, for batched fitters), evals/s and "
+        "bytes the median. Representations that train on a split (train time, "
+        "shared bytes) are cross-validated: each material is scored by a model trained without it. "
+        "↓ lower is better, ↑ higher is better. A configuration without a figure for every material has no mean "
+        "(shown as – with the partial mean over the materials it has) and is not ranked.",
+        "",
+        *_table(header, rows),
+        "",
+        *([f"{CONTENDED} measured while other brdfbench jobs ran on the same host: timings are not comparable "
+           "with unmarked ones.", ""] if s.contended else []),
+        "### Per metric",
+        "",
+    ]
+    for metric in s.accuracy:
+        ranked = s.ranking(metric.name)
+        lines += [f"#### `{metric.name}` ({metric.unit or 'unitless'}, "
+                  f"{'higher' if metric.higher_is_better else 'lower'} is better)", ""]
+        table_rows = []
+        for i, row in enumerate(r for r in ranked if r.cell(metric.name) is not None):
+            c = row.cell(metric.name)
+            table_rows.append([str(i + 1) if c.complete else "–", f"`{row.label}`", cell_text(c), _interval(c),
+                               fmt(c.median), fmt(c.worst), str(c.n)])
+        lines += _table(["rank", "representation", "mean", f"{view.CONFIDENCE:.0%} interval", "median", "worst",
+                         "materials"], table_rows)
+        lines.append("")
+    if s.categories:
+        lines += [f"### `{s.primary.name}` per category", ""]
+        header = ["representation", *[f"{c.name} ({c.materials})" for c in s.categories]]
+        lines += _table(header, [[f"`{row.label}`", *[cell_text(c.cells.get(row.config_hash)) for c in s.categories]]
+                                 for row in s.rows])
+        lines.append("")
+    return lines + _failures(s.failures)
 
 
-def _contended(row, metric: str) -> bool:
-    return row is not None and metric in tables.TIMED and bool(row.contended)
-
-
-def _cost(row, metric: str) -> str:
-    if row is None:
-        return "–"
-    return fmt(getattr(row, tables.COST_METRICS[metric])) + (CONTENDED if _contended(row, metric) else "")
-
-
-def convergence_section(name: str, fingerprint: str, df: pd.DataFrame, base: str, sampler: str,
-                        plots: Collection[str] = ()) -> list[str]:
+def convergence_section(s: ConvergenceSection, plots: Collection[str] = ()) -> list[str]:
     """Mean RMSE per spp rung per representation for one (dataset, scene, sampler)."""
-    lines = [f"## Dataset `{name}`, convergence on `{base}`, sampler `{sampler}`", "",
-             f"{df['material'].nunique()} materials, fingerprint `{fingerprint}`.", "",
+    lines = [f"## Dataset `{s.dataset}`, convergence on `{s.scene}`, sampler `{s.sampler}`", "",
+             f"{len(s.materials)} materials, fingerprint `{s.fingerprint}`.", "",
              "> Monte Carlo noise only: each representation's render at n spp against its own high-spp render "
              "(same model, independent random numbers), so the error measures how well the sampler suits the "
              "representation. Columns: mean RMSE of HDR radiance over materials (↓); the slope of log RMSE on "
              "log spp (−0.5 for an unbiased estimator; flatter when rare fireflies dominate); the RMSE at 1 spp "
              "implied by the 1/√spp law over all rungs (↓); the mean render time at the top rung.", ""]
-    rungs = tables.convergence_rungs(df)
-    rmse = rungs[rungs.base == "rmse_hdr"]
-    if rmse.empty:
+    if not s.rows:
         lines += ["No successful results yet.", ""]
     else:
-        summary = tables.summarize(df)
-        lookup = {(r.representation, r.metric, r.spp): r for r in summary.itertuples()}
-        ladder = sorted(set(rmse.spp))
-        top = ladder[-1]
-        means = {(r.representation, r.spp): r for r in rmse.itertuples()}
-        order = sorted(set(rmse.representation),
-                       key=lambda rep: getattr(lookup.get((rep, "convergence_rmse_1spp", 0)), "mean", math.inf))
-        header = ["representation", *[f"{n} spp" for n in ladder], "slope", "RMSE at 1 spp (fit) ↓",
+        top = s.ladder[-1]
+        header = ["representation", *[f"{n} spp" for n in s.ladder], "slope", "RMSE at 1 spp (fit) ↓",
                   f"render time at {top} spp (s) ↓", "materials"]
         rows = []
-        for rep in order:
-            cells = [f"`{rep}`", *[fmt(means[(rep, n)].mean) if (rep, n) in means else "–" for n in ladder]]
-            for metric, spp in (("convergence_slope", 0), ("convergence_rmse_1spp", 0), ("render_time", top)):
-                cells.append(fmt(lookup[(rep, metric, spp)].mean) if (rep, metric, spp) in lookup else "–")
-            cells.append(str(max(r.n for (name, _), r in means.items() if name == rep)))
+        for r in s.rows:
+            cells = [f"`{r.label}`", *[fmt(view.shown(r.rmse.get(n))) for n in s.ladder]]
+            cells += [fmt(view.shown(r.slope)), fmt(view.shown(r.rmse_1spp)), fmt(view.shown(r.render_time.get(top)))]
+            cells.append(str(max(c.n for c in r.rmse.values())))
             rows.append(cells)
         lines += ["### Error against spp", "", *_table(header, rows), ""]
-    plot = plots_module.convergence_plot_name(name, fingerprint, base)
+    plot = plots_module.convergence_plot_name(s.dataset, s.fingerprint, s.scene)
     if plot in plots:
-        lines += [f"![RMSE against spp and render time, every sampler on `{base}`]({plot})", ""]
-    return lines + _failures(df)
+        lines += [f"![RMSE against spp and render time, every sampler on `{s.scene}`]({plot})", ""]
+    return lines + _failures(s.failures)
 
 
-def _failures(df: pd.DataFrame) -> list[str]:
+def _failures(failures: list[view.Failure]) -> list[str]:
     """The unresolved failures of a section, or nothing."""
-    failed = tables.failures(df)
-    if failed.empty:
+    if not failures:
         return []
     lines = ["### Failures", ""]
     lines += _table(["representation", "material", "error"],
-                    [[f"`{f.representation}`", f.material, f.message.replace("|", "\\|")[:200]] for f in failed.itertuples()])
+                    [[f"`{f.label}`", f.material, f.message.replace("|", "\\|")[:200]] for f in failures])
     return lines + [""]
 
 
-def lookup_any(summary: pd.DataFrame, metric: str):
-    return summary[summary.metric == metric].iloc[0]
+def render_view(report: view.Report, plots: Collection[str] = ()) -> str:
+    lines = ["# brdfbench leaderboard", "", f"Generated {report.generated} from `{report.source}`.", ""]
+    if report.empty:
+        return "\n".join(lines + ["The results store is empty.", ""])
+    lines += [f"brdfbench {', '.join(report.versions)}; git {', '.join(report.git_shas)}. "
+              "Timings are from the machine that ran each cell.", ""]
+    for s in report.sections:
+        lines += convergence_section(s, plots) if isinstance(s, ConvergenceSection) else table_section(s)
+    return "\n".join(lines)
 
 
 def render(df: pd.DataFrame, source: str, plots: Collection[str] = ()) -> str:
     """The leaderboard text; `plots` names the figure files written beside it (linked from their sections)."""
-    lines = [
-        "# brdfbench leaderboard",
-        "",
-        f"Generated {time.strftime('%Y-%m-%d %H:%M:%S %Z')} from `{source}`.",
-        "",
-    ]
-    if df.empty:
-        return "\n".join(lines + ["The results store is empty.", ""])
-    versions = ", ".join(sorted(set(df.package_version)))
-    shas = ", ".join(sorted({s[:10] for s in df.git_sha}))
-    lines += [f"brdfbench {versions}; git {shas}. Timings are from the machine that ran each cell.", ""]
-    for (name, fingerprint, scene, harness, sampler), group in tables.sections(df):
-        if harness == "convergence":
-            lines += convergence_section(name, fingerprint, group, scene, sampler, plots)
-        else:
-            lines += dataset_section(name, fingerprint, group, scene)
-    return "\n".join(lines)
+    return render_view(view.build(df, source), plots)

@@ -9,3 +9,10 @@ MARKDOWN = ReportSpec(
     description="leaderboard.md: accuracy beside its cost per dataset and scene, failures, convergence figures (PNG)",
     target="brdfbench_leaderboard.report:markdown_report",
 )
+
+HTML = ReportSpec(
+    name="html",
+    description="leaderboard.html: one self-contained page: sortable tables with intervals, accuracy-against-cost "
+                "plots, convergence figures, the seeds' published figures beside ours",
+    target="brdfbench_leaderboard.html:html_report",
+)

@@ -99,6 +99,17 @@ def cli():
     return lambda *args, cwd: run_in_process(args, cwd)
 
 
+@pytest.fixture(scope="session")
+def cli_session(synthetic_cache):
+    """`cli_session(*args, cwd=...)`: `cli` for module and session fixtures (the session's synthetic cache)."""
+    def run(*args, cwd):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setenv("BRDFBENCH_CACHE", str(synthetic_cache))
+            return run_in_process(args, cwd)
+
+    return run
+
+
 @pytest.fixture
 def cli_process():
     """`cli_process(*args, cwd=..., env=None)`: run `brdfbench *args` in a fresh interpreter."""

@@ -80,6 +80,7 @@ class HarnessContext:
     representation_params: dict[str, Any]
     scene_name: str
     scene_params: dict[str, Any]
+    config_hash: str = ""  # the job's configuration: artifacts (`brdfbench.artifacts`) are indexed by it
 
 
 class Harness(ABC):

@@ -1,9 +1,11 @@
 """The BRDF-space harness plugin (`harness=default`, kind `accuracy`): accuracy on the MERL
-grid and random pairs, and evaluation throughput."""
+grid and random pairs, and evaluation throughput; each cell also saves its in-plane lobe
+slices beside its table's (`lobes`), for the report's polar plots."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import torch
 
@@ -18,6 +20,9 @@ class AccuracyConfig(HarnessConfig):
     metrics: tuple[str, ...] = DEFAULT_METRICS
     n_random: int = field(default=2**20, metadata={"min": 1})  # random (ωi, ωo) pairs of the HDR metrics
     throughput_batch: int = field(default=2**16, metadata={"min": 1})  # pairs per timed evaluation batch
+    lobes: bool = True  # save in-plane lobe slices of each cell under <results>/artifacts (not hashed)
+
+    RUN_CONTROL: ClassVar[tuple[str, ...]] = (*HarnessConfig.RUN_CONTROL, "lobes")
 
 
 class AccuracyHarness(Harness):
@@ -32,4 +37,17 @@ class AccuracyHarness(Harness):
         c, ctx = self.config, self.context
         dtype = getattr(torch, c.dtype)
         out = evaluate_accuracy(model, material, ctx.metric_specs, n_random=c.n_random, seed=ctx.seed, dtype=dtype)
-        return out + [evaluation_throughput(model, batch=c.throughput_batch, seed=ctx.seed, dtype=dtype)]
+        out.append(evaluation_throughput(model, batch=c.throughput_batch, seed=ctx.seed, dtype=dtype))
+        if c.lobes and ctx.config_hash:
+            self._save_lobes(model, material, label, dtype)
+        return out
+
+    def _save_lobes(self, model, material, label: str, dtype) -> None:
+        from .. import artifacts
+        from . import lobes
+
+        ctx = self.context
+        path = artifacts.index_path(ctx.results_dir, ctx.config_hash, material.name).with_suffix(".lobes.json")
+        lobes.write(path, lobes.slices(model.eval, dtype), lobes.slices(material.table.lookup), label, material.name)
+        artifacts.record(ctx.results_dir, ctx.config_hash, material.name, "lobes", path,
+                         theta_i_deg=list(lobes.THETA_I_DEG))

@@ -16,7 +16,7 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar
 
 import torch
 
@@ -61,13 +61,48 @@ class RenderHarness:
     """Renders, scores and saves; `measure` returns the image metrics plus render cost."""
 
     def __init__(self, simulator, metric_specs: list[MetricSpec], *, out_dir: Path, dataset_fingerprint: str,
-                 seed: int = 0, exposure: float = 0.0, save_images: bool = True, key: dict[str, Any] | None = None):
+                 seed: int = 0, exposure: float = 0.0, save_images: bool = True, key: dict[str, Any] | None = None,
+                 record_to: tuple[Path, str] | None = None, image_meta: dict[str, Any] | None = None,
+                 display=None):
+        """`record_to` (results folder, config hash): index each saved image there
+        (`brdfbench.artifacts`) with `image_meta` (spp, sampler, simulator) for the report.
+        `display`: a simulator at more samples per pixel whose renders (of the model and
+        of the table) are saved for a person to look at; the metrics never see them."""
         self.simulator = simulator
+        self.display = display
+        self.record_to = record_to
+        self.image_meta = dict(image_meta or {})
         self.metric_specs = metric_specs
         self.seed = seed
         self.exposure = exposure
         self.save_images = save_images
         self.dir = Path(out_dir) / config_hash({**(key or {}), "dataset": dataset_fingerprint, "seed": seed})[:12]
+
+    def _record(self, material: Material, exr: Path, reference: Path, meta: dict[str, Any]) -> None:
+        if self.record_to is None:
+            return
+        from .. import artifacts
+
+        results_dir, chash = self.record_to
+        for kind, path in (("image", exr), ("reference", reference)):
+            artifacts.record(results_dir, chash, material.name, kind, path, png=str(path.with_suffix(".png").name),
+                             exposure=self.exposure, **meta)
+
+    def _save(self, model: Representation, material: Material, label: str, image: torch.Tensor) -> None:
+        """Save the measured render; with a display simulator, also the converged pair shown."""
+        exr = self.dir / label / f"{material.name}.exr"
+        save_image(exr, image, exposure=self.exposure)
+        if self.display is None:
+            return self._record(material, exr, self.dir / "reference" / f"{material.name}.exr", self.image_meta)
+        shown = self.dir / label / f"{material.name}.display.exr"
+        save_image(shown, self.display.render(model, seed=self.seed, material=material.name, label=label),
+                   exposure=self.exposure)
+        reference = self.dir / "reference" / f"{material.name}.display.exr"
+        cached_render(reference, lambda: self.display.render(TableReference(material), seed=self.seed,
+                                                             material=material.name, label="reference"),
+                      exposure=self.exposure, what="the display reference")
+        meta = dict(self.image_meta, spp=self.image_meta.get("display_spp"), measured_spp=self.image_meta.get("spp"))
+        self._record(material, shown, reference, meta)
 
     def reference(self, material: Material) -> torch.Tensor:
         return cached_render(
@@ -82,7 +117,7 @@ class RenderHarness:
         image = self.simulator.render(model, seed=self.seed, material=material.name, label=label)
         seconds = time.perf_counter() - t0
         if self.save_images:
-            save_image(self.dir / label / f"{material.name}.exr", image, exposure=self.exposure)
+            self._save(model, material, label, image)
         out = []
         for spec in self.metric_specs:
             metric = spec.load()(exposure=self.exposure)
@@ -133,6 +168,11 @@ class RenderConfig(HarnessConfig):
     spp: int | None = field(default=None, metadata={"min": 1})  # samples per pixel; None: the scene's
     exposure: float = 0.0  # stops, for tone-mapped (LDR) metrics and PNGs
     save_images: bool = True
+    # Monte Carlo simulators: also save renders at this spp for the report's image grids (a
+    # person judges converged images; the metrics never see them). Run control: not hashed.
+    display_spp: int | None = field(default=None, metadata={"min": 1})
+
+    RUN_CONTROL: ClassVar[tuple[str, ...]] = (*HarnessConfig.RUN_CONTROL, "display_spp")
 
 
 def check_simulation(config, scene) -> None:
@@ -172,6 +212,12 @@ class ImageHarness(Harness):
         c = config
         simulator = build_simulator(context.scene, name=c.simulator, sampler=c.sampler, sampler_params=c.sampler_params,
                                     spp=c.spp, dtype=getattr(torch, c.dtype), backend=c.backend)
+        measured_spp = c.spp or context.scene.spp
+        display = None
+        if c.save_images and c.display_spp and simulator.name in MONTE_CARLO and c.display_spp > measured_spp:
+            display = build_simulator(context.scene, name=c.simulator, sampler=c.sampler,
+                                      sampler_params=c.sampler_params, spp=c.display_spp, dtype=getattr(torch, c.dtype),
+                                      backend=c.backend)
         self.harness = RenderHarness(
             simulator, context.metric_specs, out_dir=context.results_dir / "renders" / context.scene.name,
             dataset_fingerprint=context.dataset_fingerprint, seed=context.seed, exposure=c.exposure,
@@ -179,6 +225,12 @@ class ImageHarness(Harness):
             key={"scene": context.scene_name, "scene_params": context.scene_params, "simulator": simulator.name,
                  "backend": simulator.backend, "sampler": c.sampler, "sampler_params": c.sampler_params, "spp": c.spp,
                  "dtype": c.dtype},
+            record_to=(context.results_dir, context.config_hash) if context.config_hash else None,
+            image_meta={"simulator": simulator.name,
+                        "spp": measured_spp if simulator.name in MONTE_CARLO else None,
+                        "display_spp": c.display_spp if display is not None else None,
+                        "sampler": c.sampler if simulator.name in MONTE_CARLO else None},
+            display=display,
         )
 
     def measure(self, model, material, label: str) -> list[Measurement]:

@@ -28,7 +28,7 @@ from ..harness.cost import model_size
 from ..protocol import FIT_LOSS_KEY
 from .config import RunConfig
 from .memory import peak_rss, reset_peak
-from .plan import Checked, Task, check
+from .plan import Checked, Task, check, config_hash, hashed_config
 from .progress import mode as progress_mode
 
 log = logging.getLogger(__name__)
@@ -51,6 +51,7 @@ def job_state(job: RunConfig) -> JobState:
         scene=checked.scene, metric_specs=checked.metric_specs, seed=job.seed, results_dir=job.results_dir,
         dataset_fingerprint=checked.dataset.fingerprint, representation=job.representation,
         representation_params=job.representation_params, scene_name=job.scene, scene_params=job.scene_params,
+        config_hash=config_hash(hashed_config(job, checked.harness_cls)),
     )
     return JobState(checked, checked.harness_cls(job.harness, context))
 

@@ -21,6 +21,8 @@ def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path, cli_
     assert "`merl`" in board and "`lambert`" in board
     assert "fit time (s)" in board and "evals/s" in board and "bytes" in board
     assert "3 done" in out.stdout
+    page = (tmp_path / "res" / "leaderboard.html").read_text(encoding="utf-8")
+    assert "Accuracy against cost" in page and "<svg" in page and "Lobes: in-plane slices" in page
     again = cli(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)  # the second run, in this process
     assert again.returncode == 0, again.stderr
     assert "0 done, 3 already in the store" in again.stdout
@@ -43,7 +45,9 @@ def test_render_sweep_with_the_multirun_flag_among_the_overrides(tmp_path, cli):
     board = (tmp_path / "res" / "leaderboard.md").read_text()
     assert "rendered scene `sphere_envmap`" in board and "psnr_ldr" in board and "flip_ldr" in board
     assert "`merl`" in board and "`lambert`" in board
-    assert len(list((tmp_path / "res" / "renders").rglob("*.exr"))) == 3  # reference, merl, lambert
+    exrs = list((tmp_path / "res" / "renders").rglob("*.exr"))
+    shown = [p for p in exrs if p.name.endswith(".display.exr")]  # harness.display_spp: for the report's images
+    assert len(exrs) - len(shown) == 3 and len(shown) == 3  # reference, merl, lambert
 
 
 def test_list_prints_one_line_per_plugin(tmp_path, cli):

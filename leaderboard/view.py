@@ -1,0 +1,371 @@
+"""The report's view model: the store's rows as typed sections that every renderer draws.
+
+What a reader is shown is decided here once, so Markdown and HTML stay thin:
+- sections by (dataset, fingerprint, scene, harness[, sampler]); one row per configuration;
+- per metric: the mean over materials with a bootstrap 95 % interval, the median and the
+  worst case; costs beside accuracy, each with the aggregate that suits it;
+- a per-category breakdown of the ranking metric, and the failures still unresolved.
+
+An average never skips a material: a configuration that lacks a figure for any of its
+section's materials gets no mean (the cell says how many are missing) and is listed
+after the ranked ones. Intervals come from a seeded resampling, so a report is
+reproducible from its store.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from . import tables
+
+BOOTSTRAP_RESAMPLES = 2000
+CONFIDENCE = 0.95
+BOOTSTRAP_SEED = 0
+
+COST_LABELS = {
+    "fit_loss": "own fit loss",
+    "fit_time": "fit time (s)",
+    "fit_batch": "materials per fit",
+    "train_time": "train time (s)",
+    "evals_per_s": "evals/s",
+    "model_bytes": "bytes/material",
+    "shared_bytes": "shared bytes",
+    "flops_per_eval": "FLOP/eval",
+    "render_time": "render time (s)",
+    "render_samples_per_s": "render samples/s",
+    "peak_rss_fit": "peak memory, fit (B)",
+    "peak_rss_eval": "peak memory, eval (B)",
+    "peak_rss_train": "peak memory, train (B)",
+}
+#: Costs without a better direction of their own (a count, a family's own objective).
+UNDIRECTED = ("fit_loss", "fit_batch")
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A column: what it measures, in which unit, which way is better, how it aggregates."""
+
+    name: str
+    unit: str
+    higher_is_better: bool
+    kind: str  # "accuracy" | "cost"
+    aggregate: str = "mean"  # over materials: mean | median | max
+
+    @property
+    def label(self) -> str:
+        return COST_LABELS.get(self.name, self.name)
+
+    @property
+    def directed(self) -> bool:
+        return self.name not in UNDIRECTED
+
+    @property
+    def arrow(self) -> str:
+        return "" if not self.directed else ("↑" if self.higher_is_better else "↓")
+
+    @property
+    def timed(self) -> bool:
+        return self.name in tables.TIMED
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One configuration's figure for one metric over its section's materials."""
+
+    value: float | None  # the aggregate over every material; None where any is missing
+    n: int  # materials with a figure
+    expected: int  # materials in the section
+    lo: float | None = None  # bootstrap interval of the mean (accuracy metrics)
+    hi: float | None = None
+    median: float | None = None
+    worst: float | None = None
+    partial: float | None = None  # the aggregate over the materials that have one (shown as such, never ranked)
+    contended: bool = False  # measured while other brdfbench jobs ran on the host
+
+    @property
+    def missing(self) -> int:
+        return self.expected - self.n
+
+    @property
+    def complete(self) -> bool:
+        return self.value is not None
+
+
+@dataclass(frozen=True)
+class Row:
+    """A configuration: its display label, plugin and parameters, rank, and cells by metric."""
+
+    config_hash: str
+    label: str
+    plugin: str
+    params: dict[str, Any] | None
+    rank: int | None
+    cells: dict[str, Cell]
+
+    def cell(self, metric: str) -> Cell | None:
+        return self.cells.get(metric)
+
+
+@dataclass(frozen=True)
+class Category:
+    """The ranking metric's cells over the materials of one category."""
+
+    name: str
+    materials: int
+    cells: dict[str, Cell]  # config hash → cell
+
+
+@dataclass(frozen=True)
+class Failure:
+    label: str
+    material: str
+    message: str
+
+
+@dataclass(frozen=True)
+class TableSection:
+    """Accuracy (BRDF space) or image metrics of a rendered scene, with their cost."""
+
+    dataset: str
+    fingerprint: str
+    scene: str
+    harness: str
+    materials: tuple[str, ...]
+    caveat: str
+    primary: Metric | None
+    accuracy: list[Metric]
+    costs: list[Metric]
+    rows: list[Row]  # ranked by the primary metric; incomplete configurations last
+    categories: list[Category]
+    failures: list[Failure]
+    material_categories: dict[str, str] = field(default_factory=dict)
+    kind: str = field(default="table", init=False)
+
+    @property
+    def metrics(self) -> dict[str, Metric]:
+        return {m.name: m for m in [*self.accuracy, *self.costs]}
+
+    def ranking(self, metric: str) -> list[Row]:
+        """Rows by one metric's complete cells (better first), then the incomplete ones."""
+        m = self.metrics[metric]
+        return _ranked(self.rows, metric, m.higher_is_better)
+
+    @property
+    def contended(self) -> bool:
+        return any(c.contended for r in self.rows for name, c in r.cells.items() if self.metrics[name].timed)
+
+
+@dataclass(frozen=True)
+class ConvergenceRow:
+    label: str
+    rmse: dict[int, Cell]  # spp → mean RMSE of HDR radiance over materials
+    render_time: dict[int, Cell]
+    slope: Cell | None
+    rmse_1spp: Cell | None
+
+
+@dataclass(frozen=True)
+class ConvergenceSection:
+    """Monte Carlo error against spp and time for one (dataset, base scene, sampler)."""
+
+    dataset: str
+    fingerprint: str
+    scene: str
+    sampler: str
+    materials: tuple[str, ...]
+    ladder: list[int]
+    rows: list[ConvergenceRow]
+    failures: list[Failure]
+    kind: str = field(default="convergence", init=False)
+
+
+@dataclass(frozen=True)
+class Report:
+    source: str
+    generated: str
+    versions: list[str]
+    git_shas: list[str]
+    sections: list[TableSection | ConvergenceSection]
+    empty: bool
+
+
+# --------------------------------------------------------------------------- statistics
+
+
+def bootstrap_interval(values: np.ndarray, resamples: int = BOOTSTRAP_RESAMPLES, confidence: float = CONFIDENCE,
+                       seed: int = BOOTSTRAP_SEED) -> tuple[float, float]:
+    """Percentile bootstrap interval of the mean of `values` (seeded: the same store gives the same report)."""
+    values = np.asarray(values, dtype=float)
+    if values.size == 0:
+        raise ValueError("bootstrap of no values")
+    if values.size == 1 or np.all(values == values[0]):
+        return float(values[0]), float(values[0])
+    rng = np.random.default_rng(seed)
+    means = values[rng.integers(0, values.size, size=(resamples, values.size))].mean(axis=1)
+    tail = (1 - confidence) / 2
+    lo, hi = np.quantile(means, [tail, 1 - tail])
+    return float(lo), float(hi)
+
+
+def _aggregate(values: np.ndarray, how: str) -> float:
+    return float({"mean": np.mean, "median": np.median, "max": np.max}[how](values))
+
+
+def _cell(values: np.ndarray, metric: Metric, expected: int, contended: bool) -> Cell:
+    n = int(values.size)
+    if n == 0:
+        return Cell(None, 0, expected, contended=contended)
+    agg = _aggregate(values, metric.aggregate)
+    worst = float(values.min() if metric.higher_is_better else values.max())
+    lo = hi = None
+    if metric.kind == "accuracy":
+        lo, hi = bootstrap_interval(values)
+    complete = n >= expected
+    return Cell(agg if complete else None, n, expected, lo if complete else None, hi if complete else None,
+                float(np.median(values)), worst, None if complete else agg, contended)
+
+
+def shown(cell: Cell | None) -> float | None:
+    """The figure a cell shows: its aggregate, else the partial one (marked as such by renderers)."""
+    if cell is None:
+        return None
+    return cell.value if cell.value is not None else cell.partial
+
+
+def _ranked(rows: list[Row], metric: str, higher_is_better: bool) -> list[Row]:
+    def key(row: Row):
+        c = row.cells.get(metric)
+        if c is None or not c.complete:
+            return (1, 0.0, row.label)
+        return (0, -c.value if higher_is_better else c.value, row.label)
+
+    return sorted(rows, key=key)
+
+
+# --------------------------------------------------------------------------- sections
+
+
+def _metrics(df: pd.DataFrame) -> tuple[list[Metric], list[Metric]]:
+    ok = df[(df.status == "ok") & (df.spp == 0)]
+    meta = ok.groupby("metric")[["unit", "higher_is_better"]].first()
+    present = set(meta.index)
+    summary_like = pd.DataFrame({"metric": sorted(present)})
+    accuracy = [Metric(m, str(meta.loc[m, "unit"] or ""), bool(meta.loc[m, "higher_is_better"]), "accuracy")
+                for m in tables.accuracy_metrics(summary_like)]
+    costs = [Metric(m, str(meta.loc[m, "unit"] or ""), bool(meta.loc[m, "higher_is_better"]), "cost", how)
+             for m, how in tables.COST_METRICS.items() if m in present]
+    return accuracy, costs
+
+
+def _failures(df: pd.DataFrame) -> list[Failure]:
+    return [Failure(f.representation, f.material, str(f.message)) for f in tables.failures(df).itertuples()]
+
+
+def _params(text: Any) -> dict[str, Any] | None:
+    return tables._params(text)
+
+
+def table_section(key: tuple[str, str, str, str], df: pd.DataFrame) -> TableSection:
+    """One table section from its rows (labels already unique within it)."""
+    dataset, fingerprint, scene, harness = key
+    materials = tuple(sorted(df["material"].unique()))
+    accuracy, costs = _metrics(df)
+    ok = df[(df.status == "ok") & (df.spp == 0)]
+    configs = df.drop_duplicates("config_hash")
+    rows = []
+    for conf in configs.itertuples():
+        mine = ok[ok.config_hash == conf.config_hash]
+        cells = {}
+        for metric in [*accuracy, *costs]:
+            got = mine[mine.metric == metric.name]
+            if got.empty:
+                continue
+            values = got.drop_duplicates("material", keep="last")["value"].to_numpy(dtype=float)
+            contended = bool((got["concurrent_jobs"] > 1).any())
+            cells[metric.name] = _cell(values, metric, len(materials), contended)
+        rows.append(Row(conf.config_hash, conf.representation, getattr(conf, "plugin", "") or "",
+                        _params(conf.params), None, cells))
+    primary = accuracy[0] if accuracy else None
+    if primary is not None:
+        ordered = _ranked(rows, primary.name, primary.higher_is_better)
+        rank = 0
+        ranked = []
+        for row in ordered:
+            c = row.cells.get(primary.name)
+            if c is not None and c.complete:
+                rank += 1
+                ranked.append(Row(**{**row.__dict__, "rank": rank}))
+            else:
+                ranked.append(row)
+        rows = ranked
+    cats = {}
+    if "category" in df.columns:
+        cats = {str(m): str(c) for m, c in df.drop_duplicates("material")[["material", "category"]].itertuples(index=False)}
+    return TableSection(dataset, fingerprint, scene, harness, materials, tables.dataset_caveat(dataset), primary,
+                        accuracy, costs, rows, _categories(ok, primary, rows), _failures(df), cats)
+
+
+def _categories(ok: pd.DataFrame, primary: Metric | None, rows: list[Row]) -> list[Category]:
+    if primary is None or "category" not in ok.columns:
+        return []
+    cats = ok[ok.metric == primary.name].drop_duplicates(["config_hash", "material"], keep="last")
+    by_material = cats.drop_duplicates("material").set_index("material")["category"]
+    out = []
+    for name in sorted(set(by_material)):
+        members = set(by_material[by_material == name].index)
+        cells = {}
+        for row in rows:
+            got = cats[(cats.config_hash == row.config_hash) & cats.material.isin(members)]
+            cells[row.config_hash] = _cell(got["value"].to_numpy(dtype=float), primary, len(members), False)
+        out.append(Category(str(name), len(members), cells))
+    return out if len(out) > 1 else []
+
+
+def convergence_section(key: tuple[str, str, str, str, str], df: pd.DataFrame) -> ConvergenceSection:
+    dataset, fingerprint, scene, _harness, sampler = key
+    materials = tuple(sorted(df["material"].unique()))
+    ok = df[df.status == "ok"]
+    rmse_rows = ok[(ok.metric == "rmse_hdr") & (ok.spp > 0)]
+    ladder = sorted(set(int(s) for s in rmse_rows.spp))
+    err = Metric("rmse_hdr", "", False, "accuracy")
+    timed = Metric("render_time", "s", False, "cost")
+    scalar = Metric("convergence", "", False, "cost")
+    rows = []
+    for label, mine in ok.groupby("representation", sort=True):
+        def cells(metric: str, spec: Metric) -> dict[int, Cell]:
+            got = mine[(mine.metric == metric) & (mine.spp > 0)]
+            return {int(spp): _cell(g["value"].to_numpy(dtype=float), spec, g["material"].nunique(), False)
+                    for spp, g in got.groupby("spp")}
+
+        def one(metric: str) -> Cell | None:
+            got = mine[(mine.metric == metric) & (mine.spp == 0)]
+            return None if got.empty else _cell(got["value"].to_numpy(dtype=float), scalar, len(got), False)
+
+        rmse = cells("rmse_hdr", err)
+        if not rmse:
+            continue
+        rows.append(ConvergenceRow(label, rmse, cells("render_time", timed), one("convergence_slope"),
+                                   one("convergence_rmse_1spp")))
+    rows.sort(key=lambda r: shown(r.rmse_1spp) if shown(r.rmse_1spp) is not None else math.inf)
+    return ConvergenceSection(dataset, fingerprint, scene, sampler, materials, ladder, rows, _failures(df))
+
+
+def build(df: pd.DataFrame, source: str) -> Report:
+    """The report of a store's rows (`Store.frame()`), `source` naming where they came from."""
+    generated = time.strftime("%Y-%m-%d %H:%M:%S %Z")
+    if df.empty:
+        return Report(source, generated, [], [], [], True)
+    sections: list[TableSection | ConvergenceSection] = []
+    for (name, fingerprint, scene, harness, sampler), group in tables.sections(df):
+        if harness == "convergence":
+            sections.append(convergence_section((name, fingerprint, scene, harness, sampler), group))
+        else:
+            sections.append(table_section((name, fingerprint, scene, harness), group))
+    return Report(source, generated, sorted(set(map(str, df.package_version))),
+                  sorted({str(s)[:10] for s in df.git_sha}), sections, False)

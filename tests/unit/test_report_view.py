@@ -1,0 +1,173 @@
+"""The report's view model and its two renderers: intervals, missing materials, the Pareto
+front, the published figures, and bad input (empty store, unknown units, unreadable data)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import stats
+
+from brdfbench_leaderboard import html, markdown, pareto, published, view
+
+ALPHA = 0.01  # significance level of the statistical checks here
+
+
+def _frame(reps=(("good", 0.1, 10.0, 2000), ("fast", 0.5, 0.01, 24)), materials=("a", "b", "c")) -> pd.DataFrame:
+    rows = []
+    for rep, err, fit, size in reps:
+        for i, mat in enumerate(materials):
+            cell = dict(representation=rep, config_hash=f"h-{rep}", plugin=rep, params="{}", material=mat,
+                        category="metal" if i % 2 else "plastic")
+            rows += [dict(cell, metric="l1_log_cos", value=err * (1 + 0.1 * i), unit="log", higher_is_better=False),
+                     dict(cell, metric="fit_time", value=fit, unit="s", higher_is_better=False),
+                     dict(cell, metric="evals_per_s", value=1e6 / fit, unit="evals/s", higher_is_better=True),
+                     dict(cell, metric="model_bytes", value=float(size), unit="B", higher_is_better=False)]
+    df = pd.DataFrame(rows)
+    df["status"], df["message"], df["timestamp"] = "ok", "", 1.0
+    df["dataset"], df["dataset_fingerprint"], df["package_version"], df["git_sha"] = "synthetic", "fp", "0.1", "abc"
+    df["scene"], df["harness"], df["sampler"], df["spp"], df["concurrent_jobs"] = "brdf_space", "accuracy", "", 0, 1
+    return df
+
+
+def test_bootstrap_interval_is_seeded_and_brackets_the_mean():
+    values = np.random.default_rng(3).lognormal(size=40)
+    lo, hi = view.bootstrap_interval(values)
+    assert lo < values.mean() < hi
+    assert (lo, hi) == view.bootstrap_interval(values)  # the same store gives the same report
+
+
+def test_bootstrap_interval_covers_the_true_mean_at_its_level():
+    """Over 300 samples of 30 normal values, a 95 % interval must cover the true mean in
+    about 95 % of them; the percentile bootstrap runs a little narrow at n = 30, so the test
+    is one-sided against 90 % at ALPHA."""
+    rng = np.random.default_rng(11)
+    covered = sum(lo <= 0.0 <= hi for lo, hi in (view.bootstrap_interval(rng.normal(size=30), resamples=1000,
+                                                                          seed=k) for k in range(300)))
+    assert stats.binomtest(covered, 300, 0.90, alternative="less").pvalue > ALPHA, covered
+
+
+def test_a_missing_material_leaves_no_mean_and_no_rank():
+    df = _frame()
+    df = df[~((df.representation == "good") & (df.material == "c"))]
+    section = view.build(df, "s").sections[0]
+    good = next(r for r in section.rows if r.label == "good")
+    cell = good.cell("l1_log_cos")
+    assert cell.value is None and cell.missing == 1 and cell.partial == pytest.approx(0.1 * 1.05)
+    assert good.rank is None and section.rows[-1] is good  # the complete one ranks; the other follows
+    line = next(line for line in markdown.render(df, "s").splitlines() if line.startswith("| – | `good`"))
+    assert "– (0.105 over 2/3)" in line
+
+
+def test_cost_columns_follow_their_aggregate_and_direction():
+    section = view.build(_frame(), "s").sections[0]
+    metrics = section.metrics
+    assert metrics["evals_per_s"].higher_is_better and metrics["evals_per_s"].aggregate == "median"
+    assert [r.label for r in section.ranking("evals_per_s")] == ["fast", "good"]
+    assert [r.label for r in section.rows] == ["good", "fast"]  # ranked by accuracy
+
+
+def test_categories_break_down_the_ranking_metric():
+    section = view.build(_frame(), "s").sections[0]
+    assert [c.name for c in section.categories] == ["metal", "plastic"]
+    metal = section.categories[0]
+    assert metal.materials == 1 and metal.cells["h-good"].value == pytest.approx(0.11)
+
+
+def _points(xs, ys):
+    return [pareto.Point(None, x, y, None, None) for x, y in zip(xs, ys)]
+
+
+def test_pareto_front_of_a_known_set():
+    pts = _points([1, 2, 3, 4, 5], [5, 3, 4, 1, 2])
+    front = pareto.pareto_front(pts, x_higher_is_better=False, y_higher_is_better=False)
+    assert [(p.x, p.y) for p in front] == [(1, 5), (2, 3), (4, 1)]
+    front = pareto.pareto_front(pts, x_higher_is_better=True, y_higher_is_better=False)
+    assert [(p.x, p.y) for p in front] == [(5, 2), (4, 1)]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.01, 100), st.floats(0.01, 100)), min_size=1, max_size=12),
+       st.booleans(), st.booleans())
+def test_pareto_front_is_exactly_the_undominated_points(pairs, x_up, y_up):
+    pts = _points(*zip(*pairs))
+    front = {(p.x, p.y) for p in pareto.pareto_front(pts, x_up, y_up)}
+
+    def beats(a, b):  # a at least as good on both axes and better on one
+        ge = (a.x >= b.x if x_up else a.x <= b.x) and (a.y >= b.y if y_up else a.y <= b.y)
+        return ge and (a.x, a.y) != (b.x, b.y)
+
+    undominated = {(p.x, p.y) for p in pts if not any(beats(q, p) for q in pts)}
+    assert front == undominated
+
+
+def test_chart_leaves_out_incomplete_and_non_positive_figures():
+    df = _frame()
+    df.loc[(df.representation == "fast") & (df.metric == "fit_time"), "value"] = 0.0
+    c = pareto.chart(view.build(df, "s").sections[0])
+    fit = next(p for p in c.panels if p.cost.name == "fit_time")
+    assert [p.row.label for p in fit.points] == ["good"] and fit.omitted == ["fast"]
+
+
+def test_published_agreement_rules():
+    assert published.agreement(1.5, 1.0, "hdr_rmse", "1/sr")[0]
+    assert not published.agreement(3.0, 1.0, "hdr_rmse", "1/sr")[0]
+    assert published.agreement(30.0, 28.0, "psnr_ldr", "dB")[0] and not published.agreement(33.0, 28.0, "psnr_ldr", "dB")[0]
+    assert published.agreement(0.98, 0.99, "ssim_ldr", "1")[0] and not published.agreement(0.95, 0.99, "ssim_ldr", "1")[0]
+
+
+def test_every_match_names_a_published_row_with_its_source():
+    figures = published.figures()
+    for m in published.matches():
+        p = published._find(m, figures)
+        assert p is not None, m
+        assert p.source.startswith("seed 00")
+
+
+def test_published_figures_beside_ours_say_whether_they_reproduce():
+    df = _frame(reps=(("nbrdf", 0.01, 1.0, 2700),))
+    df = pd.concat([df, df[df.metric == "l1_log_cos"].assign(metric="hdr_rmse", value=0.65, unit="1/sr")])
+    report = view.build(df, "s")
+    rows = {(c.match.table, c.match.metric): c for c in published.compare(report) if c.match.representation == "nbrdf"}
+    assert rows[("Table 4", "RMSE-HDR")].verdict == "agrees"  # 0.65 beside seed 002's 0.6534
+    assert rows[("Table 3", "total memory")].verdict == "agrees"  # 2700 B beside 2.25 kB
+    assert rows[("Table 4.1", "PSNR")].verdict == "not measured"  # no rendered section here
+    page = html.render(df, "s")
+    assert "seed 002 (Timonen, Kemppinen, Lehtinen)" in page and "agrees" in page
+
+
+def test_a_published_match_without_its_row_is_reported(monkeypatch):
+    bogus = published.Match("seed 002", "Table 4", "No Such Model", "RMSE-HDR", "nbrdf", "hdr_rmse", "brdf_space", 1, "")
+    monkeypatch.setattr(published, "matches", lambda: [bogus])
+    [row] = published.compare(view.build(_frame(), "s"))
+    assert row.verdict == "published figure missing" and "No Such Model" in row.detail
+
+
+def test_unreadable_published_data_is_said_not_raised(monkeypatch):
+    def broken(name):
+        raise OSError(f"{name}: no such file")
+
+    monkeypatch.setattr(published, "_rows", broken)
+    page = html.render(_frame(), "s")
+    assert "could not be read" in page and "seed_figures.csv" in page
+
+
+def test_empty_store_pages():
+    empty = pd.DataFrame(columns=_frame().columns)
+    assert "empty" in html.render(empty, "s") and "empty" in markdown.render(empty, "s")
+
+
+def test_an_unknown_unit_is_shown_as_stored():
+    df = _frame()
+    df.loc[df.metric == "l1_log_cos", "unit"] = "furlongs"
+    assert "furlongs" in markdown.render(df, "s")
+    assert "furlongs" in html.render(df, "s")
+
+
+def test_page_is_one_file_with_its_plots_inline():
+    page = html.render(_frame(), "s")
+    assert page.count("<svg") == 1 and "<script>" in page and "<style>" in page
+    assert 'class="sortable"' in page and 'data-series="s0-pareto-s0-"' in page
+    assert "src=" not in page  # no image without renders
