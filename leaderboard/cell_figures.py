@@ -86,7 +86,7 @@ def _lobe_figure(rows: list[Row], docs: dict[int, dict], plot_id: str):
     first = docs[min(docs)]
     theta_i = first["theta_i_deg"]
     theta_o = np.radians(np.asarray(first["theta_o_deg"], dtype=float))
-    fig = Figure(figsize=(3.6 * len(theta_i), 3.4), layout="constrained")
+    fig = Figure(figsize=(3.6 * len(theta_i), 2.3), layout="constrained")
     FigureCanvasAgg(fig)
     top = 0.0
     for doc in docs.values():

@@ -88,6 +88,7 @@ def figure(c: Chart, plot_id: str):
     """A matplotlib Figure of the chart; artists of series k have SVG ids `{plot_id}-s{k}-…`."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter
 
     n = len(c.panels)
     fig = Figure(figsize=(4.2 * n, 3.9), layout="constrained")
@@ -97,8 +98,9 @@ def figure(c: Chart, plot_id: str):
     index = {id(r): k for k, r in enumerate(c.series)}
     for ax, panel in zip(axes, c.panels):
         front = panel.front
-        ax.plot([p.x for p in front], [p.y for p in front], color="0.35", lw=1.0, ls="--", zorder=1,
-                drawstyle="steps-post", label="Pareto front")[0].set_gid(f"{plot_id}-front-{panel.cost.name}")
+        xs, ys = _staircase(front)
+        ax.plot(xs, ys, color="0.35", lw=1.0, ls="--", zorder=1,
+                label="Pareto front")[0].set_gid(f"{plot_id}-front-{panel.cost.name}")
         if panel.cost.name == "model_bytes":
             _size_curves(ax, panel, index, colours, plot_id)
         for p in panel.points:
@@ -115,11 +117,35 @@ def figure(c: Chart, plot_id: str):
                         color=colours[k]).set_gid(f"{gid}-label")
         ax.set_xscale("log")
         ax.set_yscale("log")
+        _decade_at_least(ax, [p.x for p in panel.points], "x")
+        _decade_at_least(ax, [v for p in panel.points for v in (p.y, p.lo, p.hi) if v is not None and v > 0], "y")
+        for axis in (ax.xaxis, ax.yaxis):
+            axis.set_minor_formatter(NullFormatter())  # decades only: minor labels overlap on a log axis
         ax.grid(True, which="major", alpha=0.3)
         ax.set_xlabel(f"{panel.cost.label} ({'higher' if panel.cost.higher_is_better else 'lower'} is better)")
         ax.set_ylabel(f"mean {c.primary.name} ({'higher' if c.primary.higher_is_better else 'lower'} is better)")
         ax.set_title(f"{c.primary.name} against {panel.cost.label}", fontsize=9)
     return fig
+
+
+def _staircase(front: list[Point]) -> tuple[list[float], list[float]]:
+    """The front as a staircase: from each point along the cost axis to the next one's
+    cost, then to its accuracy (what the front attains between two configurations)."""
+    xs, ys = [front[0].x], [front[0].y]
+    for p in front[1:]:
+        xs += [p.x, p.x]
+        ys += [ys[-1], p.y]
+    return xs, ys
+
+
+def _decade_at_least(ax, values: list[float], which: str) -> None:
+    """Widen a log axis to a decade around its data (a narrower one shows no labelled tick)."""
+    lo, hi = min(values), max(values)
+    if hi / lo >= 10:
+        return
+    mid = (lo * hi) ** 0.5
+    lo, hi = min(lo, mid / 10**0.5) / 1.3, max(hi, mid * 10**0.5) * 1.3
+    (ax.set_xlim if which == "x" else ax.set_ylim)(lo, hi)
 
 
 def _size_curves(ax, panel: Panel, index: dict, colours: list[str], plot_id: str) -> None:

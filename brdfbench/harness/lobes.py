@@ -42,7 +42,7 @@ def slices(evaluate: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
         wi, wo = in_plane_pairs(theta_i, dtype)
         with torch.no_grad():
             values = evaluate(wi, wo).to(torch.float64)
-        out.append([[float(v) for v in row] for row in values])
+        out.append([[float(f"{float(v):.7g}") for v in row] for row in values])  # 7 digits: fp32 precision
     return out
 
 

@@ -171,3 +171,14 @@ def test_page_is_one_file_with_its_plots_inline():
     assert page.count("<svg") == 1 and "<script>" in page and "<style>" in page
     assert 'class="sortable"' in page and 'data-series="s0-pareto-s0-"' in page
     assert "src=" not in page  # no image without renders
+
+
+def test_a_size_sweep_of_one_plugin_is_joined_in_order_of_size():
+    df = _frame(reps=(("nbrdf", 0.1, 1.0, 700), ("fast", 0.5, 0.01, 24)))
+    wide = _frame(reps=(("nbrdf", 0.05, 2.0, 2700),)).assign(config_hash="h-nbrdf-wide", params='{"hidden": [21, 21]}')
+    df = pd.concat([df.assign(params=df.params.where(df.plugin != "nbrdf", '{"hidden": [8, 8]}')), wide])
+    section = view.build(df, "s").sections[0]
+    assert [r.label for r in section.rows] == ["nbrdf (hidden=[21, 21])", "nbrdf (hidden=[8, 8])", "fast"]
+    fig = pareto.figure(pareto.chart(section), "p")
+    size = [line for ax in fig.axes for line in ax.get_lines() if (line.get_gid() or "").startswith("p-size-")]
+    assert len(size) == 1 and list(size[0].get_xdata()) == [700.0, 2700.0]
