@@ -86,7 +86,8 @@ def _lobe_figure(rows: list[Row], docs: dict[int, dict], plot_id: str):
     first = docs[min(docs)]
     theta_i = first["theta_i_deg"]
     theta_o = np.radians(np.asarray(first["theta_o_deg"], dtype=float))
-    fig = Figure(figsize=(3.6 * len(theta_i), 2.3), layout="constrained")
+    fig = Figure(figsize=(3.6 * len(theta_i), 2.3))  # a fixed layout: the constrained one redraws polar axes
+    fig.subplots_adjust(left=0.04, right=0.96, top=0.86, bottom=0.02, wspace=0.3)
     FigureCanvasAgg(fig)
     top = 0.0
     for doc in docs.values():
@@ -107,7 +108,9 @@ def _lobe_figure(rows: list[Row], docs: dict[int, dict], plot_id: str):
         ax.set_rmax(max(top, 1.0) * 1.05)
         decades = range(0, int(math.ceil(max(top, 1.0))) + 1)
         ax.set_rticks(list(decades))
-        ax.set_yticklabels([f"1e{int(math.log10(LOBE_FLOOR)) + d}" for d in decades], fontsize=6)
+        step = max(1, len(decades) // 3)  # three labels at most: the radial axis is short
+        ax.set_yticklabels([f"1e{int(math.log10(LOBE_FLOOR)) + d}" if d % step == 0 else "" for d in decades],
+                           fontsize=6)
         ax.tick_params(axis="x", labelsize=7)
         ax.set_title(f"θi = {ti:g}° (dotted: incident)", fontsize=8)
     return fig

@@ -345,7 +345,7 @@ def published_section(report: view.Report) -> list[str]:
                       "this section is empty.</p>"]
     head = "".join(_th(t, cls="label" if i in (0, 1, 2, 7, 8) else "") for i, t in enumerate(
         ("source", "model (theirs)", "metric", "theirs", "theirs, our unit", "ours", "verdict", "our data", "setup")))
-    body = []
+    body: dict[bool, list[str]] = {True: [], False: []}  # measured here, or not
     for c in rows:
         p, m = c.published, c.match
         theirs = "–" if p is None else f"{fmt(p.value)} {p.unit}".strip()
@@ -356,7 +356,7 @@ def published_section(report: view.Report) -> list[str]:
                                               + ("" if c.section.scene == "brdf_space" else f", {c.section.scene}"))
         cls = {"agrees": "verdict-yes", "does not reproduce": "verdict-no"}.get(c.verdict, "missing")
         label = "" if c.section is None else next((r.label for r in c.section.rows if r.cell(m.our_metric) is c.ours), "")
-        body.append(
+        body[c.section is not None].append(
             f'<tr><td class="label">{_e(p.source if p else m.seed)}<span class="ci">{_e(p.table if p else m.table)}'
             f'</span></td><td class="label">{_e(m.model)}</td><td class="label">{_e(m.metric)} → '
             f'<code>{_e(m.our_metric)}</code></td><td data-sort="{_number(p.value if p else None)}">{_e(theirs)}</td>'
@@ -368,8 +368,16 @@ def published_section(report: view.Report) -> list[str]:
     counts = {v: sum(c.verdict == v for c in rows) for v in ("agrees", "does not reproduce", "not measured")}
     out.append(f'<p class="meta">{counts["agrees"]} agree, {counts["does not reproduce"]} do not reproduce, '
                f'{counts["not measured"]} not measured in this store.</p>')
-    return out + [f'<div class="scroll"><table class="sortable" id="published-table"><thead><tr>{head}</tr></thead>'
-                  f"<tbody>{''.join(body)}</tbody></table></div>"]
+    def table(tid: str, rows_: list[str]) -> str:
+        return (f'<div class="scroll"><table class="sortable" id="{tid}"><thead><tr>{head}</tr></thead>'
+                f"<tbody>{''.join(rows_)}</tbody></table></div>")
+
+    if body[True]:
+        out.append(table("published-table", body[True]))
+    if body[False]:
+        out.append(f"<details><summary>{len(body[False])} published figures with no figure of ours in this store"
+                   f"</summary>{table('published-unmeasured', body[False])}</details>")
+    return out
 
 
 def render(df: pd.DataFrame, source: str, results_dir: Path | None = None) -> str:

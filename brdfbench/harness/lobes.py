@@ -12,20 +12,25 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Callable
-
-import torch
+from typing import TYPE_CHECKING, Callable
 
 from ..atomic import replacing
-from ..coords import spherical_to_vector
+
+if TYPE_CHECKING:  # torch only where slices are computed: a report reads them without it
+    import torch
 
 THETA_I_DEG = (15.0, 45.0, 75.0)
 THETA_O_DEG = tuple(float(t) for t in range(-89, 90))  # 1° steps, the horizon left out
 FORMAT = "brdfbench-lobes-1"
 
 
-def in_plane_pairs(theta_i_deg: float, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
+def in_plane_pairs(theta_i_deg: float, dtype: "torch.dtype | None" = None) -> "tuple[torch.Tensor, torch.Tensor]":
     """(wi, wo) for one incident inclination and every signed outgoing angle of `THETA_O_DEG`."""
+    import torch
+
+    from ..coords import spherical_to_vector
+
+    dtype = dtype or torch.float64
     signed = torch.tensor(THETA_O_DEG, dtype=torch.float64) * (math.pi / 180)
     theta_o = signed.abs()
     phi_o = torch.where(signed >= 0, torch.full_like(signed, math.pi), torch.zeros_like(signed))
@@ -34,9 +39,11 @@ def in_plane_pairs(theta_i_deg: float, dtype: torch.dtype = torch.float64) -> tu
     return wi.to(dtype), wo.to(dtype)
 
 
-def slices(evaluate: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
-           dtype: torch.dtype = torch.float64) -> list[list[list[float]]]:
+def slices(evaluate: "Callable[[torch.Tensor, torch.Tensor], torch.Tensor]",
+           dtype: "torch.dtype | None" = None) -> list[list[list[float]]]:
     """`evaluate(wi, wo)` (N, 3) at every slice: [θi][θo][rgb] in 1/sr."""
+    import torch
+
     out = []
     for theta_i in THETA_I_DEG:
         wi, wo = in_plane_pairs(theta_i, dtype)

@@ -88,13 +88,19 @@ class RenderHarness:
             artifacts.record(results_dir, chash, material.name, kind, path, png=str(path.with_suffix(".png").name),
                              exposure=self.exposure, **meta)
 
+    def _folder(self, label: str) -> str:
+        """A configuration's image folder: its label, and its config hash where known (two
+        configurations of one label in a sweep must not share files)."""
+        return label if self.record_to is None else f"{label}-{self.record_to[1][:8]}"
+
     def _save(self, model: Representation, material: Material, label: str, image: torch.Tensor) -> None:
         """Save the measured render; with a display simulator, also the converged pair shown."""
-        exr = self.dir / label / f"{material.name}.exr"
+        folder = self.dir / self._folder(label)
+        exr = folder / f"{material.name}.exr"
         save_image(exr, image, exposure=self.exposure)
         if self.display is None:
             return self._record(material, exr, self.dir / "reference" / f"{material.name}.exr", self.image_meta)
-        shown = self.dir / label / f"{material.name}.display.exr"
+        shown = folder / f"{material.name}.display.exr"
         save_image(shown, self.display.render(model, seed=self.seed, material=material.name, label=label),
                    exposure=self.exposure)
         reference = self.dir / "reference" / f"{material.name}.display.exr"
