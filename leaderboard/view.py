@@ -267,10 +267,6 @@ def _failures(df: pd.DataFrame) -> list[Failure]:
     return [Failure(f.representation, f.material, str(f.message)) for f in tables.failures(df).itertuples()]
 
 
-def _params(text: Any) -> dict[str, Any] | None:
-    return tables._params(text)
-
-
 def table_section(key: tuple[str, str, str, str], df: pd.DataFrame) -> TableSection:
     """One table section from its rows (labels already unique within it)."""
     dataset, fingerprint, scene, harness = key
@@ -290,7 +286,7 @@ def table_section(key: tuple[str, str, str, str], df: pd.DataFrame) -> TableSect
             contended = bool((got["concurrent_jobs"] > 1).any())
             cells[metric.name] = _cell(values, metric, len(materials), contended)
         rows.append(Row(conf.config_hash, conf.representation, getattr(conf, "plugin", "") or "",
-                        _params(conf.params), None, cells))
+                        tables._params(conf.params), None, cells))
     primary = accuracy[0] if accuracy else None
     if primary is not None:
         ordered = _ranked(rows, primary.name, primary.higher_is_better)
