@@ -17,6 +17,7 @@ import numpy as np
 
 from brdfbench import artifacts
 
+from . import lobe_svg
 from .view import Row, TableSection
 
 MAX_MATERIALS = 6
@@ -44,7 +45,7 @@ def chosen_materials(section: TableSection, categories: dict[str, str]) -> list[
 @dataclass(frozen=True)
 class LobeFigure:
     material: str
-    figure: object  # matplotlib Figure
+    svg: str  # inline SVG markup
     series: list[int]  # indices into the section's rows, in legend order
     missing: list[str]  # labels without slices for this material
 
@@ -79,41 +80,13 @@ def lobe_figures(section: TableSection, results_dir: Path, categories: dict[str,
     return out
 
 
-def _lobe_figure(rows: list[Row], docs: dict[int, dict], plot_id: str):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
+def _lobe_figure(rows: list[Row], docs: dict[int, dict], plot_id: str) -> str:
     first = docs[min(docs)]
-    theta_i = first["theta_i_deg"]
     theta_o = np.radians(np.asarray(first["theta_o_deg"], dtype=float))
-    fig = Figure(figsize=(3.6 * len(theta_i), 2.3))  # a fixed layout: the constrained one redraws polar axes
-    fig.subplots_adjust(left=0.04, right=0.96, top=0.86, bottom=0.02, wspace=0.3)
-    FigureCanvasAgg(fig)
-    top = 0.0
-    for doc in docs.values():
-        for key in ("model", "table"):
-            top = max(top, float(np.nanmax(_radius(_luminance(np.asarray(doc[key], dtype=float))))))
-    for j, ti in enumerate(theta_i):
-        ax = fig.add_subplot(1, len(theta_i), j + 1, projection="polar")
-        ax.set_theta_zero_location("N")
-        ax.set_theta_direction(-1)
-        ax.set_thetamin(-90)
-        ax.set_thetamax(90)
-        table = _luminance(np.asarray(first["table"][j], dtype=float))
-        ax.plot(theta_o, _radius(table), color="black", lw=1.6, label="table")[0].set_gid(f"{plot_id}-table-{j}")
-        for k, doc in docs.items():
-            y = _luminance(np.asarray(doc["model"][j], dtype=float))
-            ax.plot(theta_o, _radius(y), color=f"C{k % 10}", lw=1.0)[0].set_gid(f"{plot_id}-s{k}-{j}")
-        ax.plot([-math.radians(ti)] * 2, [0, max(top, 1.0)], color="0.5", lw=0.8, ls=":")
-        ax.set_rmax(max(top, 1.0) * 1.05)
-        decades = range(0, int(math.ceil(max(top, 1.0))) + 1)
-        ax.set_rticks(list(decades))
-        step = max(1, len(decades) // 3)  # three labels at most: the radial axis is short
-        ax.set_yticklabels([f"1e{int(math.log10(LOBE_FLOOR)) + d}" if d % step == 0 else "" for d in decades],
-                           fontsize=6)
-        ax.tick_params(axis="x", labelsize=7)
-        ax.set_title(f"θi = {ti:g}° (dotted: incident)", fontsize=8)
-    return fig
+    table = [_radius(_luminance(np.asarray(t, dtype=float))) for t in first["table"]]
+    models = {k: [_radius(_luminance(np.asarray(m, dtype=float))) for m in doc["model"]] for k, doc in docs.items()}
+    return lobe_svg.lobe_panels(first["theta_i_deg"], theta_o, table, models, plot_id,
+                                int(math.log10(LOBE_FLOOR)))
 
 
 # --------------------------------------------------------------------------- image grids

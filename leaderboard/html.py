@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from . import cell_figures, pareto, published, view
+from . import cell_figures, lobe_svg, pareto, published, view
 from . import plots as plots_module
 from .markdown import fmt
 from .view import Cell, ConvergenceSection, Metric, TableSection
@@ -100,9 +100,7 @@ def _legend(plot_id: str, series) -> str:
 
 
 def _colour(k: int) -> str:
-    from matplotlib import colors
-
-    return colors.to_hex(f"C{k % 10}")
+    return lobe_svg.colour(k)
 
 
 def table_section(s: TableSection, sid: str, results_dir: Path | None = None) -> list[str]:
@@ -169,7 +167,7 @@ def _lobes(s: TableSection, sid: str, results_dir: Path) -> list[str]:
                          f'<span class="swatch" style="background:{_colour(k)}"></span>{_e(r.label)}</label>'
                          for k, r in zip(f.series, series))
         out += [f"<h3><code>{_e(f.material)}</code></h3>", f'<div class="legend">{legend}</div>',
-                f'<div class="plot" id="{plot_id}">{svg(f.figure, plot_id)}</div>']
+                f'<div class="plot" id="{plot_id}">{f.svg}</div>']
         if f.missing:
             out.append(f'<p class="note">No slices saved for: {_e(", ".join(f.missing))}.</p>')
     return out
@@ -210,7 +208,6 @@ def _chart(s: TableSection, sid: str) -> list[str]:
     if c is None:
         return []
     plot_id = f"{sid}-pareto"
-    fig = pareto.figure(c, plot_id)
     omitted = sorted({label for p in c.panels for label in p.omitted})
     return ["<h3>Accuracy against cost</h3>",
             f'<p class="note">Mean <code>{_e(c.primary.name)}</code> against each cost, log axes; error bars are the '
@@ -218,7 +215,7 @@ def _chart(s: TableSection, sid: str) -> list[str]:
             "it on both axes); a thin line joins one plugin's configurations in order of size. Untick a series to "
             "hide it.</p>",
             _legend(plot_id, c.series),
-            f'<div class="plot" id="{plot_id}">{svg(fig, plot_id)}</div>',
+            f'<div class="plot" id="{plot_id}">{pareto.figure(c, plot_id)}</div>',
             *([f'<p class="note">Not plotted (a figure missing or not positive): '
                f'{_e(", ".join(omitted))}.</p>'] if omitted else [])]
 

@@ -5,7 +5,7 @@ second, bytes per material), log-log, every configuration a point with its boots
 interval, the Pareto front (configurations no other beats on both axes) drawn through
 them, and a size curve joining a plugin's configurations where a sweep varied its size.
 Each configuration's artists carry an SVG id `<plot>-s<k>-…` so the page can toggle it.
-Pure matplotlib on the Agg canvas, like `plots`.
+Drawn as SVG markup (`svg_plot`).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from . import lobe_svg, svg_plot
 from .view import Metric, Row, TableSection
 
 #: Cost axes, in panel order.
@@ -85,53 +86,57 @@ def chart(section: TableSection) -> Chart | None:
     return Chart(panels, list(section.rows), primary)  # series k is the section's row k (one colour per row)
 
 
-def figure(c: Chart, plot_id: str):
-    """A matplotlib Figure of the chart; artists of series k have SVG ids `{plot_id}-s{k}-…`."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.ticker import FuncFormatter, NullLocator
+PANEL_W, PANEL_H = 340.0, 300.0
+MARGIN = dict(left=64.0, right=16.0, top=26.0, bottom=44.0)
 
-    n = len(c.panels)
-    fig = Figure(figsize=(4.2 * n, 3.9), layout="constrained")
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(1, n, squeeze=False)[0]
-    colours = [f"C{i % 10}" for i in range(len(c.series))]
+
+def figure(c: Chart, plot_id: str) -> str:
+    """The chart as inline SVG markup, one log-log panel per cost; the elements of series k
+    have ids `{plot_id}-s{k}-<cost>` (its point, interval and label), the front
+    `{plot_id}-front-<cost>` and a size curve `{plot_id}-size-<plugin>`."""
+    width = PANEL_W * len(c.panels)
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {width:.0f} {PANEL_H:.0f}" width="{width:.0f}" '
+           f'height="{PANEL_H:.0f}" font-family="sans-serif" role="img">']
     index = {id(r): k for k, r in enumerate(c.series)}
-    for ax, panel in zip(axes, c.panels):
-        front = panel.front
-        xs, ys = _staircase(front)
-        ax.plot(xs, ys, color="0.35", lw=1.0, ls="--", zorder=1,
-                label="Pareto front")[0].set_gid(f"{plot_id}-front-{panel.cost.name}")
-        if panel.cost.name == "model_bytes":
-            _size_curves(ax, panel, index, colours, plot_id)
+    for j, panel in enumerate(c.panels):
+        ys = [v for p in panel.points for v in (p.y, p.lo, p.hi) if v is not None and v > 0]
+        ax = svg_plot.LogAxes(svg_plot.log_range([p.x for p in panel.points]), svg_plot.log_range(ys),
+                              PANEL_W * j + MARGIN["left"], MARGIN["top"],
+                              PANEL_W - MARGIN["left"] - MARGIN["right"], PANEL_H - MARGIN["top"] - MARGIN["bottom"])
+        cost, primary = panel.cost, c.primary
+        out.append(ax.frame(f"{cost.label} ({'higher' if cost.higher_is_better else 'lower'} is better)",
+                            f"mean {primary.name} ({'higher' if primary.higher_is_better else 'lower'} is better)",
+                            f"{primary.name} against {cost.label}"))
+        xs, ys = _staircase(panel.front)
+        out.append(f'<path id="{plot_id}-front-{cost.name}" d="{ax.path(xs, ys)}" fill="none" stroke="#595959" '
+                   'stroke-width="1" stroke-dasharray="4,3"/>')
+        if cost.name == "model_bytes":
+            for plugin, pts in size_curves(panel).items():
+                colour = lobe_svg.colour(index[id(pts[0].row)])
+                d = ax.path([p.x for p in pts], [p.y for p in pts])
+                out.append(f'<path id="{plot_id}-size-{svg_plot.escape(plugin)}" d="{d}" fill="none" stroke="{colour}" '
+                           'stroke-width="0.8" opacity="0.6"/>')
         for p in panel.points:
             k = index[id(p.row)]
-            gid = f"{plot_id}-s{k}-{panel.cost.name}"
-            yerr = None
-            if p.lo is not None and p.hi is not None:
-                yerr = [[max(p.y - p.lo, 0.0)], [max(p.hi - p.y, 0.0)]]
-            container = ax.errorbar([p.x], [p.y], yerr=yerr, fmt="o", ms=5, color=colours[k], capsize=2, zorder=3,
-                                    mec="white" if p in front else colours[k], mew=0.8)
-            for i, artist in enumerate(container.get_children()):
-                artist.set_gid(f"{gid}-{i}")
-            ax.annotate(p.row.label, (p.x, p.y), xytext=(4, 3), textcoords="offset points", fontsize=7,
-                        color=colours[k]).set_gid(f"{gid}-label")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        _decade_at_least(ax, [p.x for p in panel.points], "x")
-        _decade_at_least(ax, [v for p in panel.points for v in (p.y, p.lo, p.hi) if v is not None and v > 0], "y")
-        for axis in (ax.xaxis, ax.yaxis):
-            axis.set_major_formatter(FuncFormatter(decade_label))
-            axis.set_minor_locator(NullLocator())  # decades only: minor ticks cost a text layout each
-        ax.grid(True, which="major", alpha=0.3)
-        ax.set_xlabel(f"{panel.cost.label} ({'higher' if panel.cost.higher_is_better else 'lower'} is better)")
-        ax.set_ylabel(f"mean {c.primary.name} ({'higher' if c.primary.higher_is_better else 'lower'} is better)")
-        ax.set_title(f"{c.primary.name} against {panel.cost.label}", fontsize=9)
-    return fig
+            colour = lobe_svg.colour(k)
+            x, y = ax.px(p.x), ax.py(p.y)
+            parts = [f'<g id="{plot_id}-s{k}-{cost.name}">']
+            if p.lo is not None and p.hi is not None and p.lo > 0 and p.hi > 0:
+                lo, hi = ax.py(p.lo), ax.py(p.hi)
+                parts.append(f'<path d="M{x:.1f},{lo:.1f} L{x:.1f},{hi:.1f} M{x - 2:.1f},{lo:.1f} L{x + 2:.1f},{lo:.1f} '
+                             f'M{x - 2:.1f},{hi:.1f} L{x + 2:.1f},{hi:.1f}" stroke="{colour}" stroke-width="1"/>')
+            edge = "#ffffff" if p in panel.front else colour
+            parts.append(f'<circle cx="{x:.1f}" cy="{y:.1f}" r="3.5" fill="{colour}" stroke="{edge}" '
+                         'stroke-width="0.8"/>')
+            parts.append(f'<text x="{x + 5:.1f}" y="{y - 4:.1f}" font-size="8" fill="{colour}">'
+                         f"{svg_plot.escape(p.row.label)}</text></g>")
+            out.append("".join(parts))
+    out.append("</svg>")
+    return "".join(out)
 
 
 def decade_label(value: float, _pos=None) -> str:
-    """A log axis's tick as plain text ("1e-4"): mathtext labels cost a parser run each."""
+    """A log axis's tick as plain text ("1e-4"), blank between decades."""
     if value <= 0:
         return ""
     exponent = math.log10(value)
@@ -150,25 +155,9 @@ def _staircase(front: list[Point]) -> tuple[list[float], list[float]]:
     return xs, ys
 
 
-def _decade_at_least(ax, values: list[float], which: str) -> None:
-    """Widen a log axis to a decade around its data (a narrower one shows no labelled tick)."""
-    lo, hi = min(values), max(values)
-    if hi / lo >= 10:
-        return
-    mid = (lo * hi) ** 0.5
-    lo, hi = min(lo, mid / 10**0.5) / 1.3, max(hi, mid * 10**0.5) * 1.3
-    (ax.set_xlim if which == "x" else ax.set_ylim)(lo, hi)
-
-
-def _size_curves(ax, panel: Panel, index: dict, colours: list[str], plot_id: str) -> None:
-    """Join the configurations of one plugin (a size sweep) in order of size."""
+def size_curves(panel: Panel) -> dict[str, list[Point]]:
+    """The configurations of one plugin (a size sweep) in order of size, per plugin with two or more."""
     by_plugin: dict[str, list[Point]] = {}
     for p in panel.points:
         by_plugin.setdefault(p.row.plugin or p.row.label, []).append(p)
-    for plugin, pts in by_plugin.items():
-        if len(pts) < 2:
-            continue
-        pts = sorted(pts, key=lambda p: p.x)
-        k = index[id(pts[0].row)]
-        ax.plot([p.x for p in pts], [p.y for p in pts], color=colours[k], lw=0.8, alpha=0.6,
-                zorder=2)[0].set_gid(f"{plot_id}-size-{plugin}")
+    return {plugin: sorted(pts, key=lambda p: p.x) for plugin, pts in by_plugin.items() if len(pts) >= 2}

@@ -204,7 +204,8 @@ def merl_coordinates64(wi: mi.Vector3f, wo: mi.Vector3f):
 def c_atan2(y, x):
     """atan2 with C's signed zeros: drjit's own gives +0 for atan2(±0, ±0) and +π for
     atan2(−0, x < 0), where C gives ±0 or ±π by the signs (and so the reader's φd cell)."""
-    on_axis = dr.copysign(dr.select(dr.copysign(1.0, x) < 0, math.pi, 0.0), y)
+    t = type(x)  # both branches typed: a select of two Python floats would be an fp32 π
+    on_axis = dr.copysign(dr.select(dr.copysign(1.0, x) < 0, t(math.pi), t(0.0)), y)
     return dr.select(y == 0, on_axis, dr.atan2(y, x))
 
 

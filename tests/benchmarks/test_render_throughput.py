@@ -92,7 +92,7 @@ def test_render_throughput(benchmark, mb, bsdfs, name, integrator):
     benchmark.pedantic(lambda: mb.render(scene, seed=next(seeds)), rounds=ROUNDS, iterations=1)
     if benchmark.enabled:  # disabled (the default test run): one render, no statistics
         benchmark.extra_info["msamples_per_s"] = round(_rate(benchmark.stats.stats.min), 2)
-    del scene
+    scene = None  # drop the scene (the lambda holds it) before collecting
     gc.collect()
 
 

@@ -183,6 +183,19 @@ def test_cells_match_near_any_edge(dk, fractions, offset, which):
     assert_reference_cells(dk, wi, wo, what=f"edge of coordinate {which}, offset {offset}")
 
 
+def test_half_vector_in_the_xz_plane_behind_the_normal(dk):
+    """h with h_y = 0 exactly and h_x < 0 has φh = π: the fp64 branch once took an fp32 π
+    there (a select of two Python floats), rotating by 8.7e-8 rad too much and moving φd
+    by 4.6e-7 cells into the neighbouring cell (found by the edge property above)."""
+    wi = torch.tensor([[-0.15405487, -0.5, 0.85221308]], dtype=torch.float32)
+    wo = torch.tensor([[-0.85482579, 0.5, 0.1388267]], dtype=torch.float32)
+    assert native_flat(dk, wi, wo)[0] == reference_flat(wi, wo)[0]
+    theta_h, theta_d, phi_d = (np.asarray(a) for a in dk.merl_reader_angles64(vec(wi), vec(wo)))
+    want = merl.reader_angles(wi, wo)
+    for got, ref in zip((theta_h, theta_d, phi_d), want):
+        assert abs(float(got[0]) - float(ref[0])) < 1e-14
+
+
 def test_tables_sit_on_aligned_memory(dk):
     """A packet gather from memory not aligned to the packet silently becomes separate
     gathers: a different, slower kernel, decided by where numpy's allocator put the table."""

@@ -3,6 +3,8 @@ front, the published figures, and bad input (empty store, unknown units, unreada
 
 from __future__ import annotations
 
+from xml.etree import ElementTree
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -10,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from brdfbench_leaderboard import html, markdown, pareto, published, view
+from brdfbench_leaderboard import html, lobe_svg, markdown, pareto, published, view
 
 ALPHA = 0.01  # significance level of the statistical checks here
 
@@ -179,6 +181,45 @@ def test_a_size_sweep_of_one_plugin_is_joined_in_order_of_size():
     df = pd.concat([df.assign(params=df.params.where(df.plugin != "nbrdf", '{"hidden": [8, 8]}')), wide])
     section = view.build(df, "s").sections[0]
     assert [r.label for r in section.rows] == ["nbrdf (hidden=[21, 21])", "nbrdf (hidden=[8, 8])", "fast"]
-    fig = pareto.figure(pareto.chart(section), "p")
-    size = [line for ax in fig.axes for line in ax.get_lines() if (line.get_gid() or "").startswith("p-size-")]
-    assert len(size) == 1 and list(size[0].get_xdata()) == [700.0, 2700.0]
+    chart = pareto.chart(section)
+    bytes_panel = next(p for p in chart.panels if p.cost.name == "model_bytes")
+    curves = pareto.size_curves(bytes_panel)
+    assert list(curves) == ["nbrdf"] and [p.x for p in curves["nbrdf"]] == [700.0, 2700.0]
+    markup = pareto.figure(chart, "p")
+    assert markup.count('id="p-size-') == 1 and 'id="p-size-nbrdf"' in markup
+
+
+def _circles(markup: str) -> dict[str, tuple[float, float]]:
+    """{series group id: (cx, cy)} of a pareto SVG, parsed as XML (so the markup must be well formed)."""
+    root = ElementTree.fromstring(markup)
+    ns = "{http://www.w3.org/2000/svg}"
+    return {g.get("id"): (float(g.find(f"{ns}circle").get("cx")), float(g.find(f"{ns}circle").get("cy")))
+            for g in root.iter(f"{ns}g") if g.find(f"{ns}circle") is not None}
+
+
+def test_pareto_svg_places_points_on_log_axes():
+    df = _frame(reps=(("a", 0.1, 1.0, 100), ("b", 0.01, 10.0, 1000), ("c", 0.001, 100.0, 10000)))
+    section = view.build(df, "s").sections[0]
+    markup = pareto.figure(pareto.chart(section), "p")
+    pts = _circles(markup)
+    k = {r.label: i for i, r in enumerate(section.rows)}
+    fit = {label: pts[f"p-s{i}-fit_time"] for label, i in k.items()}
+    # fit time 1, 10, 100 s: equal steps to the right; error 0.1 → 0.001: equal steps down (SVG's y grows down)
+    assert fit["a"][0] < fit["b"][0] < fit["c"][0] and fit["a"][1] < fit["b"][1] < fit["c"][1]
+    assert abs((fit["b"][0] - fit["a"][0]) - (fit["c"][0] - fit["b"][0])) < 0.2
+    assert abs((fit["a"][1] - fit["b"][1]) - (fit["b"][1] - fit["c"][1])) < 0.2
+
+
+def test_lobe_svg_radius_is_decades_above_the_floor():
+    theta = np.radians(np.array([-30.0, 0.0, 30.0]))
+    markup = lobe_svg.lobe_panels([45.0], theta, [np.array([0.0, 2.0, np.nan])], {3: [np.array([1.0, 1.0, 1.0])]},
+                                  "q", -3)
+    root = ElementTree.fromstring(markup)
+    ns = "{http://www.w3.org/2000/svg}"
+    groups = {g.get("id"): g.find(f"{ns}path").get("d") for g in root.iter(f"{ns}g")}
+    assert set(groups) == {"q-table-0", "q-s3-0"}
+    cx, cy = lobe_svg.PANEL_W / 2, lobe_svg.TITLE_H + lobe_svg.RADIUS + 18.0
+    # the table: the floor at the centre, two decades (the top, rmax = 2) straight up, the NaN left out
+    (x0, y0), (x1, y1) = [tuple(map(float, p[1:].split(","))) for p in groups["q-table-0"].split()]
+    assert (x0, y0) == (round(cx, 1), round(cy, 1)) and abs(x1 - cx) < 0.06 and abs(cy - y1 - lobe_svg.RADIUS) < 0.06
+    assert len(groups["q-s3-0"].split()) == 3
