@@ -15,6 +15,24 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
+# Under pytest-xdist each worker runs single-threaded, and so do the processes it starts
+# (CLI runs, cell workers): two workers on two cores, not four threads fighting for them.
+# Set before torch is imported by any test module.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[_var] = "1"
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(1)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config):
+    """Benchmarks time in one process: --benchmark-enable turns the xdist workers off
+    (pytest-benchmark cannot time under xdist, and two workers would halve each other)."""
+    if config.getoption("benchmark_enable", default=False) and hasattr(config.option, "numprocesses"):
+        config.option.numprocesses = 0
+        config.option.dist = "no"
+
 
 @pytest.fixture(scope="session")
 def synthetic_cache(tmp_path_factory) -> Path:
@@ -36,7 +54,9 @@ def _isolated_cache(monkeypatch, synthetic_cache):
 
 
 def pytest_report_header(config):
-    return f"brdfbench tests; torch threads={os.environ.get('OMP_NUM_THREADS', 'default')}"
+    workers = getattr(config.option, "numprocesses", None)
+    return (f"brdfbench tests; xdist workers={workers or 0} (one thread each); "
+            f"torch threads in this process={os.environ.get('OMP_NUM_THREADS', 'default')}")
 
 
 @dataclass

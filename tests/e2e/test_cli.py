@@ -15,21 +15,21 @@ QUICK = ["dataset.params.size=small", "harness=quick", "limit=3"]
 
 def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path, cli_process, cli):
     """The default sweep as a user starts it, in a fresh interpreter: the one full end-to-end run
-    (every built-in representation with its default recipe, on two materials, the fewest pca's
-    cross-validation takes, to keep it short)."""
-    smoke = [*QUICK[:-1], "limit=2"]
+    (every built-in representation with its default recipe, on three materials: the fewest
+    pca's cross-validation takes, two training materials per fold)."""
+    smoke = QUICK
     out = cli_process(*smoke, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     board = (tmp_path / "res" / "leaderboard.md").read_text()
     for name in ("merl", "lambert", "blinn_phong", "cook_torrance", "ggx", "pca", "nbrdf", "naive_mlp"):
         assert f"`{name}`" in board, name
     assert "fit time (s)" in board and "evals/s" in board and "bytes" in board
-    assert out.stdout.count(": 2 done") == 8
+    assert out.stdout.count(": 3 done") == 8
     page = (tmp_path / "res" / "leaderboard.html").read_text(encoding="utf-8")
     assert "Accuracy against cost" in page and "<svg" in page and "Lobes: in-plane slices" in page
     again = cli(*smoke, f"results_dir={tmp_path}/res", cwd=tmp_path)  # the second run, in this process
     assert again.returncode == 0, again.stderr
-    assert again.stdout.count("0 done, 2 already in the store") == 8
+    assert again.stdout.count("0 done, 3 already in the store") == 8
 
 
 def test_explicit_multirun_sweep(tmp_path, cli):

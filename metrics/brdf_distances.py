@@ -1,0 +1,229 @@
+"""BRDF-space distances between two sets of materials over the full 90×90×180 MERL grid, as
+the distances the distributional metrics (`distributional`) are computed from (seed 003
+eq. 6 and eq. 36; seed 000 eq. 4.12 for the cosine-weighted form):
+
+- `l1`: mean |f − f'| (1/sr),
+- `l1_log`: mean |log(1 + f) − log(1 + f')|,
+- `l1_log_cos`: mean |log(1 + f cos θi) − log(1 + f' cos θi)|,
+
+the mean taken over RGB and over the cells valid in every table of both sets (a cell one
+table lacks is left out for all pairs, so every entry of a matrix averages the same
+cells). Members are MERL-layout value arrays (3, 90, 90, 180) in 1/sr (negative = invalid,
+as `MerlTable.values`), `MerlTable`s, or cell sources read lazily (`MerlFileCells`,
+`RepresentationCells`, or any object with `grid_cells`). The grid is walked in chunks of cells: per chunk,
+each set's transformed values are stacked and the pairwise L1 sums taken by a compiled
+kernel (numba, both cores), all in fp64, so memory stays at a chunk of every member beside
+the members themselves.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+import torch
+
+from brdfbench import merl
+
+KINDS = ("l1", "l1_log", "l1_log_cos")
+#: Cells per chunk: 3 channels × this × (|A| + |B|) fp64 values are live at once.
+CHUNK_CELLS = 1 << 15
+
+
+class CellSource(Protocol):
+    """A member read lazily: its values (3, len(cells)) float64, 1/sr (negative = invalid), at
+    flat grid cells. Sets too large to hold as tables (240 full tables are 8.4 GB in fp64) are
+    passed as sources: memory then stays at one chunk of every member."""
+
+    def grid_cells(self, cells: np.ndarray) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class MerlFileCells:
+    """A MERL `.binary` file, memory-mapped: chunks are read from disk as they are needed."""
+
+    path: Path
+
+    def __post_init__(self):
+        merl.read_binary(self.path)  # validated once, up front (header, size, finiteness)
+
+    def grid_cells(self, cells: np.ndarray) -> np.ndarray:
+        raw = np.memmap(self.path, dtype="<f8", mode="r", offset=merl.HEADER_BYTES, shape=(3, merl.N_CELLS))
+        return np.asarray(raw[:, cells]) * np.asarray(merl.CHANNEL_SCALES)[:, None]
+
+
+@dataclass(frozen=True)
+class RepresentationCells:
+    """A fitted representation evaluated (fp64) at the grid's cell centres, chunk by chunk."""
+
+    model: object
+
+    def grid_cells(self, cells: np.ndarray) -> np.ndarray:
+        wi, wo = merl.grid_directions(torch.float64)
+        idx = torch.from_numpy(np.asarray(cells))
+        with torch.no_grad():
+            f = self.model.eval(wi[idx], wo[idx])
+        return f.detach().to(torch.float64).numpy().T
+
+
+class _Array:
+    def __init__(self, values: np.ndarray):
+        self.flat = values.reshape(3, -1)
+
+    def grid_cells(self, cells: np.ndarray) -> np.ndarray:
+        return np.asarray(self.flat[:, cells], dtype=np.float64)
+
+
+def _source(member, where: str) -> CellSource:
+    if hasattr(member, "grid_cells"):
+        return member
+    v = member.values if hasattr(member, "values") and not isinstance(member, np.ndarray) else member
+    v = np.asarray(v)
+    if v.shape != (3, *merl.SHAPE):
+        raise ValueError(f"{where}: expected MERL values of shape (3, {', '.join(map(str, merl.SHAPE))}), "
+                         f"a MerlTable or a cell source, got {v.shape}")
+    return _Array(v)
+
+
+def _chunk(source: CellSource, cells: np.ndarray, where: str) -> np.ndarray:
+    v = source.grid_cells(cells)
+    if v.shape != (3, len(cells)):
+        raise ValueError(f"{where}: a chunk of {len(cells)} cells came back with shape {v.shape}")
+    if not np.isfinite(v).all():
+        raise ValueError(f"{where}: non-finite values at the grid cells (exclude and count the member instead)")
+    return v
+
+
+def _cos_theta_i() -> np.ndarray:
+    wi, _ = merl.grid_directions(torch.float64)
+    return wi[:, 2].clamp_min(0).numpy()
+
+
+def _transform(kind: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    if kind == "l1":
+        return lambda f, c: f
+    if kind == "l1_log":
+        return lambda f, c: np.log1p(f)
+    if kind == "l1_log_cos":
+        return lambda f, c: np.log1p(f * c)
+    raise ValueError(f"unknown BRDF distance {kind!r}: one of {', '.join(KINDS)}")
+
+
+def common_valid_cells(*sets: Sequence, chunk_cells: int = 1 << 20) -> np.ndarray:
+    """Flat indices of the cell centres above the horizon that are valid (every channel ≥ 0
+    and finite) in every member of the sets."""
+    keep = merl.grid_above_horizon().numpy().copy()
+    everything = np.arange(merl.N_CELLS)
+    for s, members in enumerate(sets):
+        for i, m in enumerate(members):
+            src = _source(m, f"set {s}, member {i}")
+            for start in range(0, merl.N_CELLS, chunk_cells):
+                idx = everything[start:start + chunk_cells]
+                v = src.grid_cells(idx)
+                keep[idx] &= (v >= 0).all(axis=0) & np.isfinite(v).all(axis=0)
+    return np.flatnonzero(keep)
+
+
+def distance_matrix(a: Sequence, b: Sequence | None = None, kind: str = "l1", *, cells: np.ndarray | None = None,
+                    chunk_cells: int = CHUNK_CELLS, progress: Callable[[int, int], None] | None = None) -> np.ndarray:
+    """(len(a), len(b)) float64 distances of kind `kind` (b = a when None); `cells` overrides
+    the common valid cells; `progress(done, total)` is called after each chunk."""
+    transform = _transform(kind)
+    b_is_a = b is None
+    b = a if b is None else b
+    if len(a) == 0 or len(b) == 0:
+        raise ValueError(f"a distance matrix needs members in both sets (got {len(a)} and {len(b)})")
+    if chunk_cells < 1:
+        raise ValueError(f"chunk_cells must be at least 1, got {chunk_cells}")
+    va = [_source(m, f"set a, member {i}") for i, m in enumerate(a)]
+    vb = va if b_is_a else [_source(m, f"set b, member {i}") for i, m in enumerate(b)]
+    if cells is None:
+        cells = common_valid_cells(a) if b_is_a else common_valid_cells(a, b)
+    if len(cells) == 0:
+        raise ValueError("no MERL cell is valid in every member of both sets: nothing to compare")
+    cos = _cos_theta_i() if kind == "l1_log_cos" else None
+    total = np.zeros((len(va), len(vb)), dtype=np.float64)
+    for start in range(0, len(cells), chunk_cells):
+        idx = cells[start:start + chunk_cells]
+        c = None if cos is None else cos[idx]
+
+        def stack(vs, name):
+            return torch.from_numpy(np.stack([transform(_chunk(v, idx, f"set {name}, member {i}"), c).reshape(-1)
+                                              for i, v in enumerate(vs)]))
+
+        xa = stack(va, "a")
+        xb = xa if b_is_a else stack(vb, "b")
+        l1_sums(xa.numpy(), xb.numpy(), total, b_is_a)
+        if progress is not None:
+            progress(min(start + chunk_cells, len(cells)), len(cells))
+    if b_is_a:
+        total = np.triu(total, 1) + np.triu(total, 1).T  # the kernel fills the upper triangle
+    return total / (3 * len(cells))
+
+
+#: Values per sub-block of the kernel: four members' blocks stay in L1 while every other
+#: member's block of the same cells streams past them.
+BLOCK = 1024
+TILE = 4  # members of set a per pass: each value of set b read once serves four sums
+
+
+@lru_cache(maxsize=1)
+def _kernel():
+    """The pairwise-L1 kernel, compiled once (numba, cached on disk where it can be)."""
+    import numba
+
+    @numba.njit(parallel=True, fastmath=True, cache=True)
+    def kernel(xa, xb, out, symmetric, block):
+        n, k = xa.shape
+        m = xb.shape[0]
+        tiles = (n + 3) // 4
+        for p in numba.prange(tiles):
+            # tiles interleaved from both ends: a triangle's long and short rows alternate,
+            # so the threads' shares of the work stay even
+            t = p // 2 if p % 2 == 0 else tiles - 1 - p // 2
+            i0 = t * 4
+            full = i0 + 3 < n
+            for b0 in range(0, k, block):
+                b1 = min(b0 + block, k)
+                for j in range(i0 + 1 if symmetric else 0, m):
+                    b = xb[j]
+                    if full:
+                        a0, a1, a2, a3 = xa[i0], xa[i0 + 1], xa[i0 + 2], xa[i0 + 3]
+                        s0 = s1 = s2 = s3 = 0.0
+                        for c in range(b0, b1):
+                            v = b[c]
+                            s0 += abs(a0[c] - v)
+                            s1 += abs(a1[c] - v)
+                            s2 += abs(a2[c] - v)
+                            s3 += abs(a3[c] - v)
+                        out[i0, j] += s0
+                        if not symmetric or j > i0 + 1:
+                            out[i0 + 1, j] += s1
+                        if not symmetric or j > i0 + 2:
+                            out[i0 + 2, j] += s2
+                        if not symmetric or j > i0 + 3:
+                            out[i0 + 3, j] += s3
+                    else:
+                        for r in range(i0, n):
+                            if not symmetric or j > r:
+                                a = xa[r]
+                                acc = 0.0
+                                for c in range(b0, b1):
+                                    acc += abs(a[c] - b[c])
+                                out[r, j] += acc
+
+    return kernel
+
+
+def l1_sums(xa: np.ndarray, xb: np.ndarray, out: np.ndarray, symmetric: bool = False) -> None:
+    """out[i, j] += Σ_c |xa[i, c] − xb[j, c]| in fp64 (only j > i where `symmetric`: xb is xa),
+    summed in blocks in any order (the compiler may vectorise the sum)."""
+    xa = np.ascontiguousarray(xa, dtype=np.float64)
+    xb = xa if symmetric else np.ascontiguousarray(xb, dtype=np.float64)
+    if xa.shape[1] != xb.shape[1] or out.shape != (xa.shape[0], xb.shape[0]):
+        raise ValueError(f"l1_sums: shapes {xa.shape}, {xb.shape} and out {out.shape} do not match")
+    _kernel()(xa, xb, out, symmetric, BLOCK)
