@@ -173,8 +173,14 @@ TILE = 4  # members of set a per pass: each value of set b read once serves four
 
 @lru_cache(maxsize=1)
 def _kernel():
-    """The pairwise-L1 kernel, compiled once (numba, cached on disk where it can be)."""
+    """The pairwise-L1 kernel, compiled once (numba, cached on disk where it can be).
+
+    numba's own thread pool ("workqueue"), not its OpenMP layer: that one shares torch's
+    OpenMP runtime and resets its thread count, after which torch's reductions in the same
+    process sum in another order (a last-bit change in every later figure)."""
     import numba
+
+    numba.config.THREADING_LAYER = "workqueue"
 
     @numba.njit(parallel=True, fastmath=True, cache=True)
     def kernel(xa, xb, out, symmetric, block):

@@ -297,3 +297,13 @@ def test_the_l1_kernel_equals_numpy(n, m):
     brdf_distances.l1_sums(xa, xa, sym, symmetric=True)
     want = np.triu(np.abs(xa[:, None, :] - xa[None, :, :]).sum(-1), 1)
     assert np.allclose(sym, want, rtol=1e-12) and (np.tril(sym) == 0).all()
+
+
+def test_the_kernel_leaves_torchs_openmp_alone():
+    """numba's OpenMP layer shares torch's OpenMP runtime and resets its thread count, after
+    which torch's reductions in the process sum in another order (it changed a figure of a
+    later in-process run in its last bit): the kernel runs on numba's own thread pool."""
+    import numba
+
+    brdf_distances.l1_sums(np.ones((2, 8)), np.ones((2, 8)), np.zeros((2, 2)), symmetric=True)
+    assert numba.threading_layer() == "workqueue"
