@@ -18,7 +18,7 @@ import numpy as np
 from brdfbench import artifacts
 
 from . import lobe_svg
-from .view import Row, TableSection
+from .view import TableSection
 
 MAX_MATERIALS = 6
 LOBE_FLOOR = 1e-3  # 1/sr: the plots' radial axis starts here (log scale)
@@ -75,12 +75,12 @@ def lobe_figures(section: TableSection, results_dir: Path, categories: dict[str,
                 docs[k] = doc
         if not docs:
             continue
-        out.append(LobeFigure(material, _lobe_figure(section.rows, docs, f"{plot_prefix}-{len(out)}"), sorted(docs),
+        out.append(LobeFigure(material, _lobe_figure(docs, f"{plot_prefix}-{len(out)}"), sorted(docs),
                               missing))
     return out
 
 
-def _lobe_figure(rows: list[Row], docs: dict[int, dict], plot_id: str) -> str:
+def _lobe_figure(docs: dict[int, dict], plot_id: str) -> str:
     first = docs[min(docs)]
     theta_o = np.radians(np.asarray(first["theta_o_deg"], dtype=float))
     table = [_radius(_luminance(np.asarray(t, dtype=float))) for t in first["table"]]

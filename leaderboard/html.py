@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from . import cell_figures, lobe_svg, pareto, published, view
+from . import cell_figures, pareto, published, svg_plot, view
 from . import plots as plots_module
 from .markdown import fmt
 from .view import Cell, ConvergenceSection, Metric, TableSection
@@ -95,12 +95,8 @@ def _legend(plot_id: str, series) -> str:
     items = []
     for k, row in enumerate(series):
         items.append(f'<label><input type="checkbox" checked data-series="{plot_id}-s{k}-">'
-                     f'<span class="swatch" style="background:{_colour(k)}"></span>{_e(row.label)}</label>')
+                     f'<span class="swatch" style="background:{svg_plot.colour(k)}"></span>{_e(row.label)}</label>')
     return f'<div class="legend">{"".join(items)}</div>'
-
-
-def _colour(k: int) -> str:
-    return lobe_svg.colour(k)
 
 
 def table_section(s: TableSection, sid: str, results_dir: Path | None = None) -> list[str]:
@@ -164,7 +160,7 @@ def _lobes(s: TableSection, sid: str, results_dir: Path) -> list[str]:
         plot_id = f"{sid}-lobe-{i}"
         series = [s.rows[k] for k in f.series]
         legend = "".join(f'<label><input type="checkbox" checked data-series="{plot_id}-s{k}-">'
-                         f'<span class="swatch" style="background:{_colour(k)}"></span>{_e(r.label)}</label>'
+                         f'<span class="swatch" style="background:{svg_plot.colour(k)}"></span>{_e(r.label)}</label>'
                          for k, r in zip(f.series, series))
         out += [f"<h3><code>{_e(f.material)}</code></h3>", f'<div class="legend">{legend}</div>',
                 f'<div class="plot" id="{plot_id}">{f.svg}</div>']

@@ -13,16 +13,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .svg_plot import colour
+
 PANEL_W, PANEL_H = 272.0, 168.0
 RADIUS = 108.0  # pixels of the outermost decade
 TITLE_H = 18.0
-
-
-def colour(k: int) -> str:
-    """matplotlib's default colour cycle (tab10), so the legend swatches match."""
-    cycle = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd",
-             "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
-    return cycle[k % len(cycle)]
 
 
 def _path(theta: np.ndarray, r: np.ndarray, rmax: float, cx: float, cy: float) -> str:

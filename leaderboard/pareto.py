@@ -10,10 +10,9 @@ Drawn as SVG markup (`svg_plot`).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-from . import lobe_svg, svg_plot
+from . import svg_plot
 from .view import Metric, Row, TableSection
 
 #: Cost axes, in panel order.
@@ -112,13 +111,13 @@ def figure(c: Chart, plot_id: str) -> str:
                    'stroke-width="1" stroke-dasharray="4,3"/>')
         if cost.name == "model_bytes":
             for plugin, pts in size_curves(panel).items():
-                colour = lobe_svg.colour(index[id(pts[0].row)])
+                colour = svg_plot.colour(index[id(pts[0].row)])
                 d = ax.path([p.x for p in pts], [p.y for p in pts])
                 out.append(f'<path id="{plot_id}-size-{svg_plot.escape(plugin)}" d="{d}" fill="none" stroke="{colour}" '
                            'stroke-width="0.8" opacity="0.6"/>')
         for p in panel.points:
             k = index[id(p.row)]
-            colour = lobe_svg.colour(k)
+            colour = svg_plot.colour(k)
             x, y = ax.px(p.x), ax.py(p.y)
             parts = [f'<g id="{plot_id}-s{k}-{cost.name}">']
             if p.lo is not None and p.hi is not None and p.lo > 0 and p.hi > 0:
@@ -133,16 +132,6 @@ def figure(c: Chart, plot_id: str) -> str:
             out.append("".join(parts))
     out.append("</svg>")
     return "".join(out)
-
-
-def decade_label(value: float, _pos=None) -> str:
-    """A log axis's tick as plain text ("1e-4"), blank between decades."""
-    if value <= 0:
-        return ""
-    exponent = math.log10(value)
-    if abs(exponent - round(exponent)) > 1e-9:
-        return ""
-    return f"1e{int(round(exponent))}"
 
 
 def _staircase(front: list[Point]) -> tuple[list[float], list[float]]:

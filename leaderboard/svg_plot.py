@@ -11,6 +11,15 @@ import math
 from dataclasses import dataclass
 
 
+#: Series colours: matplotlib's default cycle (tab10), shared by every plot and legend swatch.
+COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd",
+           "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
+
+
+def colour(k: int) -> str:
+    return COLOURS[k % len(COLOURS)]
+
+
 def escape(text) -> str:
     return html.escape(str(text), quote=True)
 

@@ -89,13 +89,19 @@ def _source(member, where: str) -> CellSource:
     return _Array(v)
 
 
-def _chunk(source: CellSource, cells: np.ndarray, where: str) -> np.ndarray:
+def _chunk(source: CellSource, cells: np.ndarray, where: str, finite: bool) -> np.ndarray:
+    """A member's values at `cells`; `finite`: every one must be finite (cells the caller chose)."""
     v = source.grid_cells(cells)
     if v.shape != (3, len(cells)):
         raise ValueError(f"{where}: a chunk of {len(cells)} cells came back with shape {v.shape}")
-    if not np.isfinite(v).all():
+    if finite and not np.isfinite(v).all():
         raise ValueError(f"{where}: non-finite values at the grid cells (exclude and count the member instead)")
     return v
+
+
+def _valid(v: np.ndarray) -> np.ndarray:
+    """Cells (columns) valid in a member's chunk: every channel ≥ 0 and finite."""
+    return (v >= 0).all(axis=0) & np.isfinite(v).all(axis=0)
 
 
 def _cos_theta_i() -> np.ndarray:
@@ -124,8 +130,7 @@ def common_valid_cells(*sets: Sequence, chunk_cells: int = 1 << 20) -> np.ndarra
             src = _source(m, f"set {s}, member {i}")
             for start in range(0, merl.N_CELLS, chunk_cells):
                 idx = everything[start:start + chunk_cells]
-                v = src.grid_cells(idx)
-                keep[idx] &= (v >= 0).all(axis=0) & np.isfinite(v).all(axis=0)
+                keep[idx] &= _valid(src.grid_cells(idx))
     return np.flatnonzero(keep)
 
 
@@ -142,34 +147,41 @@ def distance_matrix(a: Sequence, b: Sequence | None = None, kind: str = "l1", *,
         raise ValueError(f"chunk_cells must be at least 1, got {chunk_cells}")
     va = [_source(m, f"set a, member {i}") for i, m in enumerate(a)]
     vb = va if b_is_a else [_source(m, f"set b, member {i}") for i, m in enumerate(b)]
-    if cells is None:
-        cells = common_valid_cells(a) if b_is_a else common_valid_cells(a, b)
-    if len(cells) == 0:
-        raise ValueError("no MERL cell is valid in every member of both sets: nothing to compare")
+    chosen = cells is not None
+    # One pass over the grid: where the caller chose no cells, each chunk's common valid
+    # cells are found from the very values read for it, so no member is read twice.
+    walk = np.asarray(cells) if chosen else np.flatnonzero(merl.grid_above_horizon().numpy())
     cos = _cos_theta_i() if kind == "l1_log_cos" else None
     total = np.zeros((len(va), len(vb)), dtype=np.float64)
-    for start in range(0, len(cells), chunk_cells):
-        idx = cells[start:start + chunk_cells]
-        c = None if cos is None else cos[idx]
-
-        def stack(vs, name):
-            return torch.from_numpy(np.stack([transform(_chunk(v, idx, f"set {name}, member {i}"), c).reshape(-1)
-                                              for i, v in enumerate(vs)]))
-
-        xa = stack(va, "a")
-        xb = xa if b_is_a else stack(vb, "b")
-        l1_sums(xa.numpy(), xb.numpy(), total, b_is_a)
+    used = 0
+    for start in range(0, len(walk), chunk_cells):
+        idx = walk[start:start + chunk_cells]
+        raw_a = [_chunk(v, idx, f"set a, member {i}", chosen) for i, v in enumerate(va)]
+        raw_b = raw_a if b_is_a else [_chunk(v, idx, f"set b, member {i}", chosen) for i, v in enumerate(vb)]
+        keep = np.ones(len(idx), dtype=bool)
+        if not chosen:
+            for v in raw_a if b_is_a else raw_a + raw_b:
+                keep &= _valid(v)
+            if not keep.any():
+                continue
+        sel = slice(None) if keep.all() else keep  # no copy of a chunk every cell of which counts
+        c = None if cos is None else cos[idx[sel]]
+        xa = np.stack([transform(v[:, sel], c).reshape(-1) for v in raw_a])
+        xb = xa if b_is_a else np.stack([transform(v[:, sel], c).reshape(-1) for v in raw_b])
+        l1_sums(xa, xb, total, b_is_a)
+        used += int(keep.sum())
         if progress is not None:
-            progress(min(start + chunk_cells, len(cells)), len(cells))
+            progress(min(start + chunk_cells, len(walk)), len(walk))
+    if used == 0:
+        raise ValueError("no MERL cell is valid in every member of both sets: nothing to compare")
     if b_is_a:
         total = np.triu(total, 1) + np.triu(total, 1).T  # the kernel fills the upper triangle
-    return total / (3 * len(cells))
+    return total / (3 * used)
 
 
-#: Values per sub-block of the kernel: four members' blocks stay in L1 while every other
-#: member's block of the same cells streams past them.
+#: Values per sub-block of the kernel: four members' blocks (a tile: each value of the other
+#: set read once serves four sums) stay in L1 while every other member's block streams past.
 BLOCK = 1024
-TILE = 4  # members of set a per pass: each value of set b read once serves four sums
 
 
 @lru_cache(maxsize=1)

@@ -62,25 +62,12 @@ def one_nna(d_rr, d_ss, d_rs) -> float:
     """Leave-one-out 1-NN accuracy over R ∪ S, each member labelled by its nearest neighbour's set."""
     rs = _matrix(d_rs, "d_rs")
     nr, ns = rs.shape
-    return _one_nna(_matrix(d_rr, "d_rr", (nr, nr)), _matrix(d_ss, "d_ss", (ns, ns)), rs, np.arange(ns))
-
-
-def _one_nna(rr: np.ndarray, ss: np.ndarray, rs: np.ndarray, pick: np.ndarray) -> float:
-    """1-NNA with S = the samples `pick` (indices; repeats of one sample, were any passed, are
-    not each other's neighbours)."""
-    nr, k = rr.shape[0], len(pick)
-    if nr + k < 2:
+    if nr + ns < 2:
         raise ValueError("1-NNA needs at least two members in R ∪ S")
-    full = np.empty((nr + k, nr + k))
-    full[:nr, :nr] = rr
-    full[:nr, nr:] = rs[:, pick]
-    full[nr:, :nr] = rs[:, pick].T
-    full[nr:, nr:] = ss[np.ix_(pick, pick)]
+    full = np.block([[_matrix(d_rr, "d_rr", (nr, nr)), rs], [rs.T, _matrix(d_ss, "d_ss", (ns, ns))]])
     np.fill_diagonal(full, np.inf)
-    same = pick[:, None] == pick[None, :]
-    full[nr:, nr:][same] = np.inf
     nearest = full.argmin(axis=1)  # the first of equal distances: R before S
-    is_s = np.arange(nr + k) >= nr
+    is_s = np.arange(nr + ns) >= nr
     return float((is_s[nearest] == is_s).mean())
 
 

@@ -17,8 +17,7 @@ def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path, cli_
     """The default sweep as a user starts it, in a fresh interpreter: the one full end-to-end run
     (every built-in representation with its default recipe, on three materials: the fewest
     pca's cross-validation takes, two training materials per fold)."""
-    smoke = QUICK
-    out = cli_process(*smoke, f"results_dir={tmp_path}/res", cwd=tmp_path)
+    out = cli_process(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     board = (tmp_path / "res" / "leaderboard.md").read_text()
     for name in ("merl", "lambert", "blinn_phong", "cook_torrance", "ggx", "pca", "nbrdf", "naive_mlp"):
@@ -27,7 +26,7 @@ def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path, cli_
     assert out.stdout.count(": 3 done") == 8
     page = (tmp_path / "res" / "leaderboard.html").read_text(encoding="utf-8")
     assert "Accuracy against cost" in page and "<svg" in page and "Lobes: in-plane slices" in page
-    again = cli(*smoke, f"results_dir={tmp_path}/res", cwd=tmp_path)  # the second run, in this process
+    again = cli(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)  # the second run, in this process
     assert again.returncode == 0, again.stderr
     assert again.stdout.count("0 done, 3 already in the store") == 8
 

@@ -307,3 +307,26 @@ def test_the_kernel_leaves_torchs_openmp_alone():
 
     brdf_distances.l1_sums(np.ones((2, 8)), np.ones((2, 8)), np.zeros((2, 2)), symmetric=True)
     assert numba.threading_layer() == "workqueue"
+
+
+class _Counting:
+    """A table as a cell source that counts the cells it is asked for."""
+
+    def __init__(self, values):
+        self.flat, self.read = values.reshape(3, -1), 0
+
+    def grid_cells(self, cells):
+        self.read += len(cells)
+        return self.flat[:, cells].copy()
+
+
+def test_each_member_is_read_once_per_cell():
+    """The common valid cells come from the values read for the distances, not from a pass of their own."""
+    tables = _tables(2, 6)
+    tables[0][:, 3, 4, :] = -1.0  # cells one member lacks
+    members = [_Counting(t) for t in tables]
+    d = brdf_distances.distance_matrix(members, kind="l1", chunk_cells=300_000)
+    above = int(merl.grid_above_horizon().sum())
+    assert [m.read for m in members] == [above, above]
+    want = _slow_distance(tables[0], tables[1], "l1", brdf_distances.common_valid_cells(tables))
+    assert d[0, 1] == pytest.approx(want, rel=1e-6)
