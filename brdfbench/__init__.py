@@ -1,7 +1,8 @@
 """brdfbench: benchmark and evaluation framework for BRDF representations and generators.
 
 The notebook API (`brdfbench.api`: `datasets`, `representation`, `evaluate`, `render`,
-`results`) is imported on first use (PEP 562), so `import brdfbench` stays light.
+`results`, `generator`, `training_data`) is imported on first use (PEP 562), so `import
+brdfbench` stays light.
 """
 
 import types as _types
@@ -10,7 +11,7 @@ from . import render as _render_package  # the rendering subpackage; its __init_
 
 __version__ = "0.1.0"
 
-__all__ = ["Scores", "datasets", "evaluate", "render", "representation", "results"]
+__all__ = ["Scores", "datasets", "evaluate", "generator", "render", "representation", "results", "training_data"]
 
 
 class _CallableRenderPackage(_types.ModuleType):

@@ -24,10 +24,11 @@ if TYPE_CHECKING:
     import torch
 
     from .data import Dataset
+    from .generator_protocol import Generator, TrainingData
     from .protocol import Material, Representation
     from .store_protocol import Store
 
-__all__ = ["Scores", "datasets", "evaluate", "render", "representation", "results"]
+__all__ = ["Scores", "datasets", "evaluate", "generator", "render", "representation", "results", "training_data"]
 
 
 def _harness_config(kind: str, **keys: Any) -> HarnessConfig:
@@ -64,6 +65,28 @@ def representation(name: str, **params: Any) -> Representation:
     spec = registry.get("representations", name)
     _checked(spec.load(), params, "representation.params")
     return spec.create(**params)
+
+
+def generator(name: str, **params: Any) -> Generator:
+    """A new, unfitted instance of the generator plugin `name`; `.fit(bb.training_data(ds))`
+    fits it and `.sample(n, seed=...)` draws materials (fitted representations)."""
+    spec = registry.get("generators", name)
+    _checked(spec.load(), params, "generator.params")
+    return spec.create(**params)
+
+
+def training_data(dataset: Dataset, names: list[str] | None = None) -> TrainingData:
+    """What a generator's `fit` reads: the dataset's training split (its own, where it
+    declares one; else every material), or the materials `names`."""
+    from .generator_protocol import TrainingData
+
+    if names is None:
+        names = list((dataset.splits or {}).get("train", dataset.materials))
+    unknown = [n for n in names if n not in dataset.materials]
+    if unknown:
+        raise ConfigError(f"dataset {dataset.name!r} has no material(s) {', '.join(map(repr, unknown))}")
+    return TrainingData(names=tuple(names), load=dataset.load, categories=dict(dataset.categories or {}),
+                        weight_source=dataset.weights, dataset=dataset.name)
 
 
 # --------------------------------------------------------------------------- scores

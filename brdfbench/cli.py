@@ -7,8 +7,8 @@ leaderboard). Subcommands that need no config:
     brdfbench list                      one line per registered plugin
     brdfbench report [--results DIR]    regenerate the leaderboard from the results store
     brdfbench merge SRC... --into DIR   copy the cells of other results folders into DIR's store
-    brdfbench check NAME                run the conformance kit on a representation
-    brdfbench inspect MODEL.safetensors describe a saved model (loads no code)
+    brdfbench check NAME                run the conformance kit on a representation or generator
+    brdfbench inspect MODEL.safetensors describe a saved model or generator (loads no code)
     brdfbench convert SRC DEST          convert neural-BRDF weights between formats
                                         (.h5, .npy 675-vector, .pt state_dict, .safetensors)
 
@@ -82,9 +82,13 @@ def cmd_merge(args) -> int:
 
 
 def cmd_check(args) -> int:
-    from .testing import check_representation
+    from . import registry
+    from .testing import check_generator, check_representation
 
-    report = check_representation(args.name, n_pairs=args.pairs, full=args.full)
+    if args.name in registry.names("generators") and args.name not in registry.names("representations"):
+        report = check_generator(args.name, full=args.full)
+    else:
+        report = check_representation(args.name, n_pairs=args.pairs, full=args.full)
     print(report.summary())
     return 0 if report.passed else 1
 
@@ -92,6 +96,14 @@ def cmd_check(args) -> int:
 def cmd_inspect(args) -> int:
     from . import modelio
 
+    if modelio.holds_generator(args.path):
+        name, gen = modelio.load_generator(args.path)
+        print(f"{args.path}: generator {name!r}, params {gen.params}, {gen.nbytes} bytes, learns from "
+              f"{gen.learns_from}")
+        for key, value in gen.metadata().items():
+            text = str(value)
+            print(f"  {key}: {text if len(text) <= 200 else text[:200] + '…'}")
+        return 0
     name, model = modelio.load(args.path)
     print(f"{args.path}: representation {name!r}, params {model.params}, {model.nbytes} bytes"
           + (f" (+{model.shared_nbytes} shared)" if model.shared_nbytes else "")
@@ -129,13 +141,13 @@ def _subcommand_parser() -> argparse.ArgumentParser:
     p.add_argument("--into", required=True, metavar="DIR", help="results folder to merge into (created if new)")
     p.add_argument("--store", default="sqlite", help="results store plugin of all of them (default: sqlite)")
     p.set_defaults(func=cmd_merge)
-    p = sub.add_parser("check", help="run the conformance kit on a registered representation")
+    p = sub.add_parser("check", help="run the conformance kit on a registered representation or generator")
     p.add_argument("name")
     p.add_argument("--pairs", type=int, default=10**6, help="adversarial direction pairs per dtype (default 1e6)")
     p.add_argument("--full", action="store_true",
                    help="fit with the representation's default parameters, not its quick check_params")
     p.set_defaults(func=cmd_check)
-    p = sub.add_parser("inspect", help="describe a saved model file")
+    p = sub.add_parser("inspect", help="describe a saved model or generator file")
     p.add_argument("path")
     p.set_defaults(func=cmd_inspect)
     p = sub.add_parser("convert", help="convert neural-BRDF weights (.h5 .npy .pt .safetensors) to .npy, .pt or .safetensors")

@@ -14,7 +14,8 @@ from .runner import RunConfig, harness_config
 
 JOB_SUMMARY = "brdfbench_job.json"
 #: Top-level keys of config.yaml besides the groups; anything else is a typo.
-TOP_LEVEL = {"representation", "dataset", "harness", "scene", "seed", "materials", "limit", "results_dir", "save_models",
+TOP_LEVEL = {"representation", "generator", "dataset", "harness", "scene", "seed", "materials", "limit", "results_dir",
+             "save_models",
              "isolate", "progress", "store", "store_params"}
 
 
@@ -59,13 +60,15 @@ def to_run_config(cfg: DictConfig, job: str = "") -> RunConfig:
     if unknown:
         raise ConfigError(f"unknown config key(s) {', '.join(unknown)}; known: {', '.join(sorted(TOP_LEVEL))}")
     rep = _section(cfg, "representation")
+    gen = _section(cfg, "generator")
     ds = _section(cfg, "dataset")
     harness = _section(cfg, "harness")
     scene = _section(cfg, "scene")
-    for key, section in (("representation", rep), ("dataset", ds)):
+    for key, section in (("representation", rep), ("dataset", ds)) + ((("generator", gen),) if gen else ()):
         if "name" not in section:
             raise ConfigError(f"config key {key}.name is missing")
     for key, section, allowed in (("representation", rep, {"name", "label", "params"}),
+                                  ("generator", gen, {"name", "label", "params"}),
                                   ("dataset", ds, {"name", "params"}), ("scene", scene, {"name", "params"})):
         extra = sorted(set(section) - allowed)
         if extra:
@@ -77,10 +80,15 @@ def to_run_config(cfg: DictConfig, job: str = "") -> RunConfig:
     materials = _value(cfg, "materials")
     if materials is not None and not isinstance(materials, (list, tuple)):
         raise ConfigError(f"materials={materials!r} must be a list of material names (e.g. materials=[a,b])")
+    if gen:  # a generator job: it measures the generator, the representation group is not read
+        model = dict(representation="", representation_params={}, generator=gen["name"],
+                     generator_params=gen.get("params") or {},
+                     label=gen.get("label") or choices.get("generator") or gen["name"])
+    else:
+        model = dict(representation=rep["name"], representation_params=rep.get("params") or {},
+                     label=rep.get("label") or choices.get("representation") or rep["name"])
     return RunConfig(
-        representation=rep["name"],
-        representation_params=rep.get("params") or {},
-        label=rep.get("label") or choices.get("representation") or rep["name"],
+        **model,
         dataset=ds["name"],
         dataset_params=ds.get("params") or {},
         harness=harness_config(**harness),

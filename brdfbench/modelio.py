@@ -1,4 +1,4 @@
-"""Saving and loading fitted representations without pickle.
+"""Saving and loading fitted representations and generators without pickle.
 
 One `.safetensors` file per model: the tensors of `state_dict()`, and in the safetensors
 header metadata a JSON document with the plugin name, its params, its metadata and the
@@ -6,7 +6,8 @@ package version. Loading parses that header and the raw tensor bytes only: it ne
 code. A pickle or a torch.save archive is refused with a clear error, and so is a header
 that does not fit a registered representation (unknown name, params its constructor does
 not take, tensors its `from_state` needs but the file lacks): a `ModelFileError` naming
-the file.
+the file. Generators are saved the same way (`save_generator` / `load_generator`), under
+their own format tag, so a generator file never loads as a representation or back.
 """
 
 from __future__ import annotations
@@ -26,6 +27,11 @@ from .errors import ModelFileError, PluginError
 from .protocol import Representation
 
 _FORMAT = "brdfbench.model/1"
+#: group -> (format tag, header key naming the plugin, the word for it in messages)
+_KINDS = {
+    "representations": (_FORMAT, "representation"),
+    "generators": ("brdfbench.generator/1", "generator"),
+}
 
 
 def _sniff_refusal(path: Path, head: bytes) -> str | None:
@@ -40,10 +46,20 @@ def _sniff_refusal(path: Path, head: bytes) -> str | None:
 
 def save(model: Representation, name: str, path: str | os.PathLike) -> Path:
     """Write `model` (registered as `name`) to `path` atomically."""
+    return _save(model, name, path, "representations")
+
+
+def save_generator(generator, name: str, path: str | os.PathLike) -> Path:
+    """Write a fitted generator (registered as `name`) to `path` atomically."""
+    return _save(generator, name, path, "generators")
+
+
+def _save(model, name: str, path: str | os.PathLike, group: str) -> Path:
     path = Path(path)
+    fmt, key = _KINDS[group]
     header = {
-        "format": _FORMAT,
-        "representation": name,
+        "format": fmt,
+        key: name,
         "params": model.params,
         "metadata": model.metadata(),
         "brdfbench_version": __version__,
@@ -57,6 +73,26 @@ def save(model: Representation, name: str, path: str | os.PathLike) -> Path:
 
 def load(path: str | os.PathLike) -> tuple[str, Representation]:
     """Read a model file; returns (representation name, model)."""
+    return _load(path, "representations")
+
+
+def load_generator(path: str | os.PathLike):
+    """Read a generator file; returns (generator name, fitted generator)."""
+    return _load(path, "generators")
+
+
+def holds_generator(path: str | os.PathLike) -> bool:
+    """Whether a safetensors file's brdfbench header says it holds a generator (reads the header only)."""
+    try:
+        with safetensors.safe_open(str(path), framework="pt") as f:
+            header = json.loads((f.metadata() or {}).get("brdfbench", "{}"))
+    except Exception:  # not readable as one: `load` says why
+        return False
+    return isinstance(header, dict) and header.get("format") == _KINDS["generators"][0]
+
+
+def _load(path: str | os.PathLike, group: str):
+    fmt, kind = _KINDS[group]
     path = Path(path)
     try:
         with open(path, "rb") as f:
@@ -76,29 +112,37 @@ def load(path: str | os.PathLike) -> tuple[str, Representation]:
         raise ModelFileError(f"{path}: not a valid safetensors model file ({exc})") from None
     try:
         header = json.loads(meta["brdfbench"])
-        if header.get("format") != _FORMAT:
-            raise KeyError("format")
-        name, params, extra = header["representation"], header["params"], header["metadata"]
     except (KeyError, ValueError, TypeError) as exc:
         raise ModelFileError(f"{path}: safetensors file lacks brdfbench metadata (key {exc})") from None
-    for key, value, kind in (("representation", name, str), ("params", params, dict), ("metadata", extra, dict)):
-        if not isinstance(value, kind):
-            raise ModelFileError(f"{path}: brdfbench metadata key {key!r} must be a {kind.__name__}, got {value!r}")
-    cls = _representation_class(path, name)
-    _check_params(path, name, cls, params)
-    return name, _rebuild(path, name, cls, params, tensors, extra)
+    if not isinstance(header, dict):
+        raise ModelFileError(f"{path}: brdfbench metadata must be a JSON object")
+    other = [k for g, (f, k) in _KINDS.items() if g != group and header.get("format") == f]
+    if other:
+        raise ModelFileError(f"{path}: holds a {other[0]}, not a {kind}")
+    try:
+        if header.get("format") != fmt:
+            raise KeyError("format")
+        name, params, extra = header[kind], header["params"], header["metadata"]
+    except KeyError as exc:
+        raise ModelFileError(f"{path}: safetensors file lacks brdfbench metadata (key {exc})") from None
+    for key, value, typ in ((kind, name, str), ("params", params, dict), ("metadata", extra, dict)):
+        if not isinstance(value, typ):
+            raise ModelFileError(f"{path}: brdfbench metadata key {key!r} must be a {typ.__name__}, got {value!r}")
+    cls = _plugin_class(path, name, group, kind)
+    _check_params(path, name, cls, params, kind)
+    return name, _rebuild(path, name, cls, params, tensors, extra, kind)
 
 
-def _representation_class(path: Path, name: str) -> type[Representation]:
+def _plugin_class(path: Path, name: str, group: str, kind: str) -> type:
     """The class registered as `name`; an unknown name is the file's fault, named with the known ones."""
     try:
-        spec = registry.get("representations", name)
+        spec = registry.get(group, name)
     except PluginError as exc:
-        raise ModelFileError(f"{path}: the file names representation {name!r}, which is not registered: {exc}") from None
+        raise ModelFileError(f"{path}: the file names {kind} {name!r}, which is not registered: {exc}") from None
     return spec.load()
 
 
-def _check_params(path: Path, name: str, cls: type, params: dict) -> None:
+def _check_params(path: Path, name: str, cls: type, params: dict, kind: str = "representation") -> None:
     """Refuse params the constructor does not take (or lacks), naming them and what it takes."""
     try:
         signature = inspect.signature(cls)
@@ -110,13 +154,13 @@ def _check_params(path: Path, name: str, cls: type, params: dict) -> None:
         unknown = [k for k in params if k not in taken]
         if unknown:
             raise ModelFileError(
-                f"{path}: representation {name!r} takes no param(s) {', '.join(map(repr, unknown))}; "
-                f"it takes: {takes}. The file was saved by another representation or version"
+                f"{path}: {kind} {name!r} takes no param(s) {', '.join(map(repr, unknown))}; "
+                f"it takes: {takes}. The file was saved by another {kind} or version"
             )
     try:
         signature.bind(**params)
     except TypeError as exc:
-        raise ModelFileError(f"{path}: params {params} do not fit representation {name!r} ({exc}); it takes: {takes}") from None
+        raise ModelFileError(f"{path}: params {params} do not fit {kind} {name!r} ({exc}); it takes: {takes}") from None
 
 
 class _Tensors(dict):
@@ -139,7 +183,8 @@ def _expected_tensors(cls: type, params: dict) -> list[str]:
         return []
 
 
-def _rebuild(path: Path, name: str, cls: type, params: dict, tensors: dict, extra: dict) -> Representation:
+def _rebuild(path: Path, name: str, cls: type, params: dict, tensors: dict, extra: dict,
+             kind: str = "representation"):
     """`cls.from_state`, with a malformed or mismatched file reported as a ModelFileError naming it."""
     held = _Tensors(tensors)
     try:
@@ -152,12 +197,12 @@ def _rebuild(path: Path, name: str, cls: type, params: dict, tensors: dict, extr
         if held.missing:
             missing = list(dict.fromkeys([*held.missing, *(k for k in _expected_tensors(cls, params) if k not in tensors)]))
             raise ModelFileError(
-                f"{path}: lacks tensor(s) {', '.join(map(repr, missing))} that representation {name!r} needs; "
-                f"the file holds: {holds}. Was it saved by another representation?"
+                f"{path}: lacks tensor(s) {', '.join(map(repr, missing))} that {kind} {name!r} needs; "
+                f"the file holds: {holds}. Was it saved by another {kind}?"
             ) from None
         detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
         raise ModelFileError(
-            f"{path}: representation {name!r} cannot be rebuilt from this file ({detail}); the file holds tensors: {holds}"
+            f"{path}: {kind} {name!r} cannot be rebuilt from this file ({detail}); the file holds tensors: {holds}"
         ) from None
 
 

@@ -32,7 +32,7 @@ def run(cfg: RunConfig) -> dict[str, int]:
     plan = make_plan(cfg, checked, store.done_cells)
     recorder = Recorder(store, plan, uuid.uuid4().hex[:12])
     counts = {"done": 0, "skipped": plan.skipped, "failed": 0}
-    progress = Progress(cfg, len(checked.dataset), plan.skipped)
+    progress = Progress(cfg, plan.total, plan.skipped, unit="set" if checked.harness_cls.scope == "set" else "material")
 
     def on_cell(message: tuple) -> None:
         material, category, measurements, status, text, concurrent = message
@@ -67,7 +67,7 @@ def _run_isolated(cfg: RunConfig, plan, recorder: Recorder, on_cell, on_note) ->
         message = outcome.message or "the worker finished its task without a result for this material"
         for name in task.materials:
             if name not in finished:
-                on_cell((name, plan.dataset.category(name), [], "failed", message, 1))
+                on_cell((name, plan.category(name), [], "failed", message, 1))
 
 
 def _run_inline(cfg: RunConfig, plan, recorder: Recorder, on_cell, on_note) -> None:

@@ -57,7 +57,18 @@ class RepresentationSpec(PluginSpec):
 
 @dataclass(frozen=True)
 class GeneratorSpec(PluginSpec):
-    """A material generator (PCA, VAE, hyperdiffusion, ...)."""
+    """A material generator (PCA, VAE, hyperdiffusion, ...); `target` is a
+    `brdfbench.generator_protocol.Generator` subclass."""
+
+    #: what it learns from: "tables" (MERL tables) or "nbrdf" (aligned NBRDF weight
+    #: vectors): checked against the dataset before any work, without importing the plugin
+    learns_from: str = "tables"
+    #: constructor arguments of the conformance kit's quick run (a short training), so that
+    #: `check_generator` takes seconds; the full run uses the generator's defaults
+    check_params: Mapping[str, Any] = field(default_factory=dict)
+
+    def create(self, **params: Any):
+        return self.load()(**params)
 
 
 @dataclass(frozen=True)

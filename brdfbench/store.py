@@ -1,16 +1,17 @@
 """The results store: typed rows in SQLite, one transaction per benchmark cell.
 
-Schema v2 (`PRAGMA user_version = 2`):
+Schema v3 (`PRAGMA user_version = 3`):
 - `configs`: config hash → label, plugin, its version, harness, and the resolved
   parameters behind the hash (JSON), so two configurations never share a row;
 - `environments`: where figures were measured (host, CPU model, cores, threads, launcher);
 - `results`: one row per (configuration, dataset fingerprint, scope, material or set,
-  metric, spp) — a unique key, so concurrent writers cannot duplicate a cell — with typed
-  scene / sampler / spp / scope columns and the environment and concurrency of its cell.
+  category, metric, distance, spp) — a unique key, so concurrent writers cannot duplicate
+  a cell — with typed scene / sampler / spp / scope / distance columns and the environment
+  and concurrency of its cell.
 
 A cell is (config hash, dataset fingerprint, scope, material): `write_cell` replaces a
 failed cell and leaves a finished one as it is (the first complete writer wins), so
-writing is idempotent. Stores written by v1 (no user_version) migrate in one transaction.
+writing is idempotent. Stores written by v1 (no user_version) and v2 migrate in one transaction.
 A store that cannot be read or written is a DataError naming the file and what to do.
 """
 
@@ -27,7 +28,7 @@ from typing import Any, Iterator
 import pandas as pd
 
 from .errors import DataError
-from .store_migrations import migrate_v1
+from .store_migrations import migrate_v1, migrate_v2
 from .store_protocol import CELL, ConfigRecord, Environment, Row, Store
 from .store_schema import SCHEMA, SCHEMA_VERSION
 
@@ -76,6 +77,9 @@ class ResultsStore(Store):
             if missing:
                 raise DataError(f"{self.path}: schema v{version} store lacks table(s) {', '.join(sorted(missing))}; "
                                 "move it aside and run again")
+            return
+        if version == 2 and {"configs", "environments", "results"} <= tables:
+            migrate_v2(con, self.path)
             return
         if version > SCHEMA_VERSION:
             raise DataError(f"{self.path}: written by a newer brdfbench (schema v{version}, this one reads up to "

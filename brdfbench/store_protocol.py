@@ -34,7 +34,7 @@ class Row:
     dataset: str
     dataset_fingerprint: str
     material: str  # the material, or the set's name for scope="set"
-    category: str
+    category: str  # the material's category; for a set's per-category count, the category counted
     metric: str
     value: float | None
     unit: str
@@ -51,6 +51,7 @@ class Row:
     scope: str = "material"  # "material": one material's figure; "set": a whole set's
     env_id: str = UNKNOWN_ENV
     concurrent_jobs: int = 1  # brdfbench cells running on this host while this one ran (itself included)
+    distance: str = ""  # the distance a set-level figure is computed over (e.g. MMD over "l1"), else ""
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
-"""The results store's SQL schema (v2), shared by the store and its migrations."""
+"""The results store's SQL schema (v3), shared by the store and its migrations."""
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 SCHEMA = """
 CREATE TABLE configs (
@@ -43,7 +43,8 @@ CREATE TABLE results (
     timestamp REAL NOT NULL,
     env_id TEXT NOT NULL,
     concurrent_jobs INTEGER NOT NULL,
-    UNIQUE (config_hash, dataset_fingerprint, scope, material, metric, spp)
+    distance TEXT NOT NULL DEFAULT '',
+    UNIQUE (config_hash, dataset_fingerprint, scope, material, category, metric, distance, spp)
 );
 CREATE INDEX results_cell ON results (config_hash, dataset_fingerprint, scope, material);
 """

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from . import cell_figures, pareto, published, svg_plot, view
+from . import cell_figures, generation_render, pareto, published, svg_plot, view
 from . import plots as plots_module
 from .markdown import fmt
 from .view import Cell, ConvergenceSection, Metric, TableSection
@@ -292,6 +292,8 @@ def _failures(failures: list[view.Failure]) -> list[str]:
 def _section_title(s) -> str:
     if isinstance(s, ConvergenceSection):
         return f"{s.dataset}: convergence on {s.scene}, sampler {s.sampler}"
+    if getattr(s, "kind", "") == "generation":
+        return f"{s.dataset}: generators"
     return f"{s.dataset}" + ("" if s.scene == "brdf_space" else f", scene {s.scene}")
 
 
@@ -314,6 +316,8 @@ def render_view(report: view.Report, convergence_svgs: dict[str, str] | None = N
             if isinstance(s, ConvergenceSection):
                 name = plots_module.convergence_plot_name(s.dataset, s.fingerprint, s.scene)
                 body += convergence_section(s, sid, convergence_svgs.pop(name, None))
+            elif getattr(s, "kind", "") == "generation":
+                body += generation_render.html_section(s, sid, results_dir)
             else:
                 body += table_section(s, sid, results_dir)
     body += extra or []

@@ -153,8 +153,15 @@ def render_view(report: view.Report, plots: Collection[str] = ()) -> str:
         return "\n".join(lines + ["The results store is empty.", ""])
     lines += [f"brdfbench {', '.join(report.versions)}; git {', '.join(report.git_shas)}. "
               "Timings are from the machine that ran each cell.", ""]
+    from . import generation_render
+
     for s in report.sections:
-        lines += convergence_section(s, plots) if isinstance(s, ConvergenceSection) else table_section(s)
+        if isinstance(s, ConvergenceSection):
+            lines += convergence_section(s, plots)
+        elif getattr(s, "kind", "") == "generation":
+            lines += generation_render.markdown(s)
+        else:
+            lines += table_section(s)
     return "\n".join(lines)
 
 

@@ -34,7 +34,7 @@ COST_METRICS = {
 TIMED = ("fit_time", "train_time", "evals_per_s", "render_time", "render_samples_per_s")
 
 _DEFAULTS = {"config_hash": None, "params": "null", "spp": 0, "sampler": "", "scene": "brdf_space", "harness": None,
-             "concurrent_jobs": 1, "scope": "material"}
+             "concurrent_jobs": 1, "scope": "material", "distance": ""}
 
 
 def normalise(df: pd.DataFrame) -> pd.DataFrame:

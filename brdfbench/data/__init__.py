@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator, Mapping
 
 from ..errors import DataError
 
 if TYPE_CHECKING:  # keep `import brdfbench.data.specs` light: listing plugins must not import torch
+    from ..generator_protocol import WeightSet
     from ..protocol import Material
 
 #: Largest plausible BRDF value (1/sr). The brightest measured specular peaks reach a few
@@ -46,6 +47,10 @@ class Dataset:
     `fingerprint` identifies the content (e.g. generator version + seed, or the files'
     sha256) so the results store can tell a re-run of the same data from new data. `load`
     checks each table once (`check_table`), so unusable data stops the run naming the file.
+
+    A dataset made for generation may declare its own `splits` ({"train": names, "test":
+    names}) and provide aligned NBRDF weight vectors of its materials (`weights(names)`,
+    e.g. NeuMERL's, fitted and cached on first use).
     """
 
     name: str
@@ -53,6 +58,8 @@ class Dataset:
     loader: Callable[[str], Material]
     fingerprint: str
     categories: dict[str, str] | None = None
+    splits: Mapping[str, tuple[str, ...]] | None = None
+    weights: Callable[[tuple[str, ...]], WeightSet] | None = None
 
     def load(self, material: str) -> Material:
         if material not in self.materials:
@@ -80,4 +87,6 @@ class Dataset:
             chosen = list(names)
         if limit is not None:
             chosen = chosen[:limit]
-        return Dataset(self.name, tuple(chosen), self.loader, self.fingerprint, self.categories)
+        kept = set(chosen)
+        splits = None if self.splits is None else {k: tuple(m for m in v if m in kept) for k, v in self.splits.items()}
+        return Dataset(self.name, tuple(chosen), self.loader, self.fingerprint, self.categories, splits, self.weights)

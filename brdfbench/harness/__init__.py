@@ -1,4 +1,4 @@
-"""Harnesses: plugins (group `brdfbench.harnesses`) that measure fitted representations.
+"""Harnesses: plugins (group `brdfbench.harnesses`) that measure fitted representations or generators.
 
 A harness owns a typed config (a `HarnessConfig` subclass: its keys, types and ranges are
 checked before any work), its up-front validation against the scene and metrics, the
@@ -6,7 +6,13 @@ fields that enter the configuration hash (all but run control such as time limit
 its measuring. It is built once per job inside the worker process that runs the job's
 cells, so what it builds (simulators, reference renders, direction sets) is reused for
 every material. `scope` says whether it scores one material at a time ("material") or a
-whole sample set at once ("set").
+whole sample set at once ("set"), and `plugin_group` whether it measures representations
+or generators.
+
+A set-scope harness plans its own cells (`plan_sets`: the training materials and the names
+of the sets to score, e.g. independent sample draws), trains the job's plugin once per
+task (`train`) and measures each set (`measure_set`); the pipeline times, isolates and
+records them as it does per-material cells.
 """
 
 from __future__ import annotations
@@ -14,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import types
 import typing
-from abc import ABC, abstractmethod
+from abc import ABC
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -31,6 +37,8 @@ class Measurement:
     unit: str
     higher_is_better: bool
     spp: int = 0  # samples per pixel of a per-rung figure (convergence); 0 otherwise
+    distance: str = ""  # the distance a set-level figure is computed over (generation); "" otherwise
+    category: str | None = None  # the category a set-level count is of; None: the cell's own category
 
 
 @dataclass(frozen=True)
@@ -76,11 +84,13 @@ class HarnessContext:
     seed: int
     results_dir: Path
     dataset_fingerprint: str
-    representation: str
+    representation: str  # the job's plugin (a representation, or a generator for generator harnesses)
     representation_params: dict[str, Any]
     scene_name: str
     scene_params: dict[str, Any]
     config_hash: str = ""  # the job's configuration: artifacts (`brdfbench.artifacts`) are indexed by it
+    dataset: Any = None  # the job's dataset (`brdfbench.data.Dataset`), already subset
+    label: str = ""  # the job's label
 
 
 class Harness(ABC):
@@ -89,6 +99,8 @@ class Harness(ABC):
     name: ClassVar[str]
     Config: ClassVar[type[HarnessConfig]] = HarnessConfig
     scope: ClassVar[str] = "material"
+    #: the registry group of what it measures: "representations" or "generators"
+    plugin_group: ClassVar[str] = "representations"
     #: Metric domains the harness accepts in `harness.metrics`.
     domains: ClassVar[tuple[str, ...]] = ()
     #: True: needs a rendered scene; False: needs scene=brdf_space.
@@ -109,6 +121,28 @@ class Harness(ABC):
                                   f"harness measures on {', '.join(cls.domains) or 'no metric domain'}")
 
     @classmethod
+    def check_plugin(cls, config: HarnessConfig, spec, dataset) -> None:
+        """Up-front checks of the job's plugin against the data (e.g. what a generator learns
+        from); a ConfigError names what does not fit. The default accepts everything."""
+
+    @classmethod
+    def plan_sets(cls, config: HarnessConfig, dataset, seed: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """A set-scope harness's (training materials, names of the sets to score)."""
+        raise NotImplementedError(f"harness {cls.name!r} scores materials, not sets")
+
+    def prepare(self, model, materials: tuple[str, ...]) -> None:
+        """A set-scope harness: make the training data ready (e.g. fit a dataset's cached NBRDF
+        weights) before `train` is timed; its own step, under the same time limit."""
+
+    def train(self, model, materials: tuple[str, ...], seed: int, progress: bool | str = False):
+        """A set-scope harness: fit the job's plugin on `materials`; returns the fitted model."""
+        raise NotImplementedError(f"harness {self.name!r} scores materials, not sets")
+
+    def measure_set(self, model, set_name: str) -> list[Measurement]:
+        """A set-scope harness: measurements of one set (e.g. one draw of samples)."""
+        raise NotImplementedError(f"harness {self.name!r} scores materials, not sets")
+
+    @classmethod
     def key(cls, config: HarnessConfig, scene_name: str, scene_params: dict[str, Any]) -> dict[str, Any]:
         """The harness's share of the configuration hash."""
         out: dict[str, Any] = {"harness": config.hashed()}
@@ -125,9 +159,9 @@ class Harness(ABC):
         self.config = config
         self.context = context
 
-    @abstractmethod
     def measure(self, model, material, label: str) -> list[Measurement]:
-        """Measurements of one fitted model on its material."""
+        """Measurements of one fitted model on its material (every material-scope harness implements it)."""
+        raise NotImplementedError(f"harness {self.name!r} scores sets, not materials")
 
 
 # --------------------------------------------------------------------------- typed values

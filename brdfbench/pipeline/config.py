@@ -41,7 +41,8 @@ def _default_harness() -> HarnessConfig:
 
 @dataclass(frozen=True)
 class RunConfig:
-    """One job: a representation configuration on a dataset through one harness."""
+    """One job: a representation (or, for a harness that measures generators, a generator)
+    configuration on a dataset through one harness."""
 
     representation: str
     representation_params: dict[str, Any]
@@ -63,6 +64,28 @@ class RunConfig:
     progress: str = field(default="auto", metadata={"choices": PROGRESS})
     launcher: str = "basic"  # the Hydra launcher that started the job (recorded with every figure)
     job: str = ""  # the job's number in a sweep, for progress lines
+    # a generation job's generator (harness=generation); "" for jobs that measure representations
+    generator: str = ""
+    generator_params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def plugin_group(self) -> str:
+        """The registry group of the job's model plugin: "generators" or "representations"."""
+        return "generators" if self.generator else "representations"
+
+    @property
+    def plugin(self) -> str:
+        """The name of the plugin the job measures (its generator, else its representation)."""
+        return self.generator or self.representation
+
+    @property
+    def plugin_params(self) -> dict[str, Any]:
+        return self.generator_params if self.generator else self.representation_params
+
+    @property
+    def params_key(self) -> str:
+        """The config key of the plugin's parameters, for messages."""
+        return "generator.params" if self.generator else "representation.params"
 
     def __post_init__(self):
         hints = typing.get_type_hints(type(self))

@@ -1,7 +1,8 @@
 """Execute: one task of a job, a function of the job and the task alone (run in a worker).
 
 It loads the plugins and the data, fits (timed, peak memory), lets the harness measure
-(peak memory), and emits messages for the supervisor: `("phase", budget_s, what, note)`
+(peak memory) — or, for a set-scope harness, trains the job's plugin once and lets the
+harness measure each set — and emits messages for the supervisor: `("phase", budget_s, what, note)`
 before each step with a time limit (`note`: a line for the progress log where the step is
 long work, training or a batch fit; else None), `("cell", material, category,
 measurements, status, message)` for each finished material. A plugin fault becomes a
@@ -49,9 +50,9 @@ def job_state(job: RunConfig) -> JobState:
     checked = check(job)
     context = HarnessContext(
         scene=checked.scene, metric_specs=checked.metric_specs, seed=job.seed, results_dir=job.results_dir,
-        dataset_fingerprint=checked.dataset.fingerprint, representation=job.representation,
-        representation_params=job.representation_params, scene_name=job.scene, scene_params=job.scene_params,
-        config_hash=config_hash(hashed_config(job, checked.harness_cls)),
+        dataset_fingerprint=checked.dataset.fingerprint, representation=job.plugin,
+        representation_params=job.plugin_params, scene_name=job.scene, scene_params=job.scene_params,
+        config_hash=config_hash(hashed_config(job, checked.harness_cls)), dataset=checked.dataset, label=job.label,
     )
     return JobState(checked, checked.harness_cls(job.harness, context))
 
@@ -71,8 +72,10 @@ def _limit(job: RunConfig, n: int = 1) -> float | None:
 
 
 def execute(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency: Callable[[], int] = lambda: 1) -> None:
-    """Run `task`, emitting one cell message per material (see the module docstring)."""
-    dataset, spec = state.checked.dataset, state.checked.rep_spec
+    """Run `task`, emitting one cell message per material or set (see the module docstring)."""
+    if state.checked.harness_cls.scope == "set":
+        return _execute_sets(job, task, state, emit, concurrency)
+    dataset, spec = state.checked.dataset, state.checked.spec
     trained, extra = None, []
     if task.train is not None:
         what = f"training {job.label} on {len(task.train)} materials"
@@ -147,6 +150,46 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
             emit(("cell", material.name, material.category, [], "failed", message, busy))
         else:
             emit(("cell", material.name, material.category, measurements, "ok", "", max(busy, concurrency())))
+
+
+def _execute_sets(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency: Callable[[], int]) -> None:
+    """A set-scope task: train the job's plugin once on `task.train`, then measure each set."""
+    harness = state.harness
+    try:
+        model = state.checked.spec.create(**job.plugin_params)
+        what = f"preparing the training data of {job.label} ({len(task.train)} materials)"
+        emit(("phase", _limit(job), what, what))
+        harness.prepare(model, task.train)
+        what = f"training {job.label} on {len(task.train)} materials"
+        emit(("phase", _limit(job), what, what))
+        torch.manual_seed(job.seed)
+        reset_peak()
+        t0 = time.perf_counter()
+        model = harness.train(model, task.train, job.seed,
+                              progress=f"training {job.label}" if progress_mode(job) == "bar" else False)
+        extra = [Measurement("train_time", time.perf_counter() - t0, "s", False), *_memory("peak_rss_train")]
+        if job.save_models:
+            modelio.save_generator(model, job.plugin, job.results_dir / "models" / state.checked.dataset.fingerprint
+                                   / job.label / "generator.safetensors")
+    except Exception as exc:  # a failed training fails every set of the task, and the sweep goes on
+        message = "training failed: " + _fault(exc)
+        log.warning("%s: %s", job.label, message)
+        for name in task.materials:
+            emit(("cell", name, "set", [], "failed", message, 1))
+        return
+    for name in task.materials:
+        emit(("phase", _limit(job), f"{job.label}: {name}", None))
+        busy = concurrency()
+        try:
+            reset_peak()
+            measurements = harness.measure_set(model, name) + _memory("peak_rss_eval") + extra
+            _check_finite(measurements, name)
+        except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
+            message = _fault(exc)
+            log.warning("%s failed on %s: %s", job.label, name, message)
+            emit(("cell", name, "set", [], "failed", message, busy))
+        else:
+            emit(("cell", name, "set", measurements, "ok", "", max(busy, concurrency())))
 
 
 def _fail_all(emit: Emit, dataset, names, message: str) -> None:

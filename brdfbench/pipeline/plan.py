@@ -35,8 +35,8 @@ class Task:
 class Checked:
     """A job's plugins, loaded and checked."""
 
-    rep_spec: Any
-    rep_cls: type
+    spec: Any  # the job's model plugin: a representation's or a generator's spec
+    cls: type
     probe: Any  # an unfitted instance: proves the parameter values, tells the fit batch size
     harness_cls: type
     scene: Any
@@ -63,6 +63,15 @@ class Plan:
     def pending(self) -> int:
         return sum(len(t.materials) for t in self.tasks)
 
+    @property
+    def total(self) -> int:
+        """Cells of the job: its materials, or its sets for a set-scope harness."""
+        return self.pending + self.skipped
+
+    def category(self, cell: str) -> str:
+        """The category recorded with a cell: its material's, or "set"."""
+        return "set" if self.checked.harness_cls.scope == "set" else self.dataset.category(cell)
+
 
 def check_params(cls, params: dict[str, Any], where: str, internal: tuple[str, ...] = ()) -> None:
     """Reject parameters the plugin's constructor does not take, naming the key; `internal`
@@ -86,7 +95,7 @@ _PRECHECKED: dict[str, Checked] = {}
 
 
 def _key(job: RunConfig) -> str:
-    return repr((job.representation, job.representation_params, job.dataset, job.dataset_params, job.harness,
+    return repr((job.plugin_group, job.plugin, job.plugin_params, job.dataset, job.dataset_params, job.harness,
                  job.scene, job.scene_params, job.materials, job.limit))
 
 
@@ -104,25 +113,37 @@ def check(job: RunConfig) -> Checked:
         return kept
     check_params(registry.get("stores", job.store).load(), job.store_params, "store_params",
                  internal=("results_dir", "create"))
-    rep_spec = registry.get("representations", job.representation)
-    rep_cls = rep_spec.load()
-    check_params(rep_cls, job.representation_params, "representation.params")
-    probe = rep_spec.create(**job.representation_params)  # a bad parameter value fails now, naming it
+    harness_cls = harness_class(job.harness.kind)
+    if harness_cls.plugin_group != job.plugin_group:
+        raise ConfigError(_mismatch(harness_cls, job))
+    spec = registry.get(job.plugin_group, job.plugin)
+    cls = spec.load()
+    check_params(cls, job.plugin_params, job.params_key)
+    probe = spec.create(**job.plugin_params)  # a bad parameter value fails now, naming it
     scene_factory = registry.get("scenes", job.scene).load()
     check_params(scene_factory, job.scene_params, "scene.params")
     scene = scene_factory(**job.scene_params)
-    harness_cls = harness_class(job.harness.kind)
     metric_specs = [registry.get("metrics", m) for m in job.harness.metrics]
     harness_cls.validate(job.harness, scene, metric_specs)
     ds_factory = registry.get("datasets", job.dataset).load()
     check_params(ds_factory, job.dataset_params, "dataset.params")
     dataset = ds_factory(**job.dataset_params).subset(list(job.materials) if job.materials else None, job.limit)
-    return Checked(rep_spec, rep_cls, probe, harness_cls, scene, metric_specs, dataset)
+    harness_cls.check_plugin(job.harness, spec, dataset)
+    return Checked(spec, cls, probe, harness_cls, scene, metric_specs, dataset)
+
+
+def _mismatch(harness_cls, job: RunConfig) -> str:
+    if harness_cls.plugin_group == "generators":
+        return (f"harness={harness_cls.name} measures generators: choose one with generator=NAME "
+                f"({', '.join(registry.names('generators')) or 'none registered'})")
+    return (f"generator={job.generator} needs a harness that measures generators (harness=generation); "
+            f"harness={harness_cls.name} measures representations")
 
 
 def hashed_config(job: RunConfig, harness_cls) -> dict[str, Any]:
     """What a configuration's hash covers: plugin, parameters, harness and seed (no run control)."""
-    return {"representation": job.representation, "params": job.representation_params, "seed": job.seed,
+    head = ({"generator": job.generator} if job.generator else {"representation": job.representation})
+    return {**head, "params": job.plugin_params, "seed": job.seed,
             **harness_cls.key(job.harness, job.scene, job.scene_params)}
 
 
@@ -135,7 +156,12 @@ def make_plan(job: RunConfig, checked: Checked, done_cells: Callable[[str, str, 
     done = done_cells(chash, dataset.fingerprint, checked.harness_cls.scope)
     tasks: list[Task] = []
     skipped = 0
-    if checked.rep_cls.needs_training:
+    if checked.harness_cls.scope == "set":
+        train, sets = checked.harness_cls.plan_sets(job.harness, dataset, job.seed)
+        pending = tuple(s for s in sets if s not in done)
+        skipped = len(sets) - len(pending)
+        tasks = [Task(pending, tuple(train))] if pending else []
+    elif checked.cls.needs_training:
         for train, fold in plan_folds(dataset.materials, True, job.harness.folds, job.seed):
             pending = tuple(m for m in fold if m not in done)
             skipped += len(fold) - len(pending)
@@ -146,7 +172,7 @@ def make_plan(job: RunConfig, checked: Checked, done_cells: Callable[[str, str, 
         skipped = len(dataset.materials) - len(pending)
         batch = max(1, int(checked.probe.fit_batch_size))
         tasks = [Task(pending[i:i + batch]) for i in range(0, len(pending), batch)]
-    return Plan(job, checked, chash, params, registry.version("representations", job.representation),
+    return Plan(job, checked, chash, params, registry.version(job.plugin_group, job.plugin),
                 checked.harness_cls.columns(job.harness, checked.scene), tasks, skipped)
 
 

@@ -21,7 +21,7 @@ def mode(cfg: RunConfig) -> str:
 
 
 class Progress:
-    def __init__(self, cfg: RunConfig, total: int, skipped: int):
+    def __init__(self, cfg: RunConfig, total: int, skipped: int, unit: str = "material"):
         self.mode = mode(cfg)
         self.cfg = cfg
         self.total = total
@@ -31,9 +31,9 @@ class Progress:
         self.bar = None
         what = f"{cfg.label} on {cfg.dataset}"
         if self.mode == "bar":
-            self.bar = tqdm(total=total, initial=skipped, desc=what, unit="material", dynamic_ncols=True)
+            self.bar = tqdm(total=total, initial=skipped, desc=what, unit=unit, dynamic_ncols=True)
         elif self.mode == "lines":
-            self._line(f"{what}: {total} materials, {skipped} already in the store")
+            self._line(f"{what}: {total} {unit}s, {skipped} already in the store")
 
     def _line(self, text: str) -> None:
         print(f"{self.prefix}{text}", file=sys.stderr, flush=True)

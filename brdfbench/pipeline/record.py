@@ -22,7 +22,7 @@ class Recorder:
         self.run_id = run_id
         self.env_id = ""
         job = plan.job
-        store.write_config(ConfigRecord(plan.config_hash, job.label, job.representation, plan.plugin_version,
+        store.write_config(ConfigRecord(plan.config_hash, job.label, job.plugin, plan.plugin_version,
                                         job.harness.kind, plan.params))
 
     def environment(self, env: Environment) -> None:
@@ -42,7 +42,9 @@ class Recorder:
         )
         if status == "ok":
             rows = [Row(metric=m.metric, value=m.value, unit=m.unit, higher_is_better=m.higher_is_better, spp=m.spp,
-                        status="ok", message="", **common) for m in measurements]
+                        distance=m.distance, status="ok", message="",
+                        **{**common, "category": common["category"] if m.category is None else m.category})
+                    for m in measurements]
         else:
             rows = [Row(metric="error", value=None, unit="", higher_is_better=False, status="failed", message=message,
                         **common)]

@@ -26,7 +26,6 @@ Mitsuba variant is restored after each test.
 
 from __future__ import annotations
 
-import contextlib
 import math
 from dataclasses import dataclass
 from typing import Callable, Sequence
@@ -37,6 +36,7 @@ import torch
 from . import Sampler
 from .. import mitsuba_env
 from ..mitsuba_env import LLVM_MIN_MAJOR, LLVM_VARIANT, SCALAR_VARIANT, mitsuba_variant  # noqa: F401 (re-exported)
+from ..threads import torch_threads
 from .charts import Chart, ChartChoice, chart_for
 from .cubature import DOMAIN_EXTENT, DOMAIN_LO, domain_shape, tabulate_expected
 
@@ -87,19 +87,6 @@ def chi2_variant() -> str:
     return mitsuba_env.choose_variant(VARIANT_ENV, warn=False)
 
 
-@contextlib.contextmanager
-def torch_threads(n: int):
-    """Run a block with n torch threads, then restore the previous count.
-
-    The χ² engine works on arrays of ~1e6 elements, where a second thread gains little
-    and, on a machine whose cores are busy, costs up to 10× (measured: 5.3 s against 0.6 s
-    for one test with two threads on two loaded cores)."""
-    previous = torch.get_num_threads()
-    torch.set_num_threads(n)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(previous)
 
 
 # --------------------------------------------------------------------------- the test

@@ -15,11 +15,15 @@ Capability tags on the spec select the checks (`fittable`, `reciprocal`, `isotro
 a spec's `xfail_checks` maps a check name to the reason it is expected to fail, and its
 `check_params` are the constructor arguments of the default, quick run (a short fit, say);
 `full=True` (`brdfbench check NAME --full`) checks the representation's defaults.
+
+Generators have a kit of their own: `check_generator("pca_brdf")` / `generator_checks`
+(see `brdfbench.testing.generators`).
 """
 
 from __future__ import annotations
 
 from .adversarial import FAMILIES, adversarial_pairs
+from .generators import check_generator, generator_checks
 from .kit import Check, ConformanceReport, check_representation, representation_checks
 from .metrics import check_metric
 
@@ -28,7 +32,9 @@ __all__ = [
     "Check",
     "ConformanceReport",
     "adversarial_pairs",
+    "check_generator",
     "check_metric",
+    "generator_checks",
     "check_representation",
     "representation_checks",
 ]

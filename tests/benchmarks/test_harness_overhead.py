@@ -69,15 +69,6 @@ def _run(benchmark, target_of, setup, n_random: int) -> None:
                                 throughput_s=statistics.median(t for _, t in split))
 
 
-@pytest.fixture
-def enabled(request):
-    """The benchmark fixture, or a skip where benchmarks are disabled (before it is made)."""
-    config = request.config
-    if config.getoption("benchmark_disable") and not config.getoption("benchmark_enable"):
-        pytest.skip("a timing: run with --benchmark-enable")
-    return request.getfixturevalue("benchmark")
-
-
 def test_first_cell(enabled, tables):
     _run(enabled, lambda: _fresh(tables[0]), _clear_caches, N_RANDOM)
 

@@ -205,7 +205,7 @@ def test_metrics_that_do_not_fit_the_harness_or_scene_stop_the_run_up_front(tmp_
 
 
 def test_an_unknown_harness_kind_lists_the_harnesses():
-    with pytest.raises(ConfigError, match="harness.kind 'sideways'.*Registered: accuracy, convergence, render"):
+    with pytest.raises(ConfigError, match="harness.kind 'sideways'.*Registered: accuracy, convergence, generation, render"):
         harness_config(kind="sideways")
 
 

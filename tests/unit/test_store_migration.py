@@ -86,3 +86,64 @@ def test_a_failed_migration_leaves_the_store_as_it_was(tmp_path):
     with pytest.raises(Exception, match="not a brdfbench v1 store"):
         ResultsStore(path)
     assert path.read_bytes() == before
+
+
+#: The v2 DDL, as v2's store_schema.py created it (no `distance` column; a unique key
+#: without `category` and `distance`).
+V2 = """
+CREATE TABLE configs (config_hash TEXT PRIMARY KEY, label TEXT NOT NULL, plugin TEXT NOT NULL,
+    plugin_version TEXT NOT NULL, harness TEXT NOT NULL, params TEXT NOT NULL);
+CREATE TABLE environments (env_id TEXT PRIMARY KEY, host TEXT NOT NULL, cpu_model TEXT NOT NULL,
+    cpu_count INTEGER NOT NULL, threads INTEGER NOT NULL, launcher TEXT NOT NULL, platform TEXT NOT NULL);
+CREATE TABLE results (
+    run_id TEXT NOT NULL, config_hash TEXT NOT NULL, dataset TEXT NOT NULL, dataset_fingerprint TEXT NOT NULL,
+    scope TEXT NOT NULL CHECK (scope IN ('material', 'set')), material TEXT NOT NULL, category TEXT NOT NULL,
+    scene TEXT NOT NULL, sampler TEXT NOT NULL, spp INTEGER NOT NULL, metric TEXT NOT NULL, value REAL,
+    unit TEXT NOT NULL, higher_is_better INTEGER NOT NULL, status TEXT NOT NULL CHECK (status IN ('ok', 'failed')),
+    message TEXT NOT NULL, seed INTEGER NOT NULL, package_version TEXT NOT NULL, git_sha TEXT NOT NULL,
+    timestamp REAL NOT NULL, env_id TEXT NOT NULL, concurrent_jobs INTEGER NOT NULL,
+    UNIQUE (config_hash, dataset_fingerprint, scope, material, metric, spp)
+);
+CREATE INDEX results_cell ON results (config_hash, dataset_fingerprint, scope, material);
+PRAGMA user_version = 2;
+"""
+
+
+def _v2(path):
+    con = sqlite3.connect(path)
+    con.executescript(V2)
+    con.execute("INSERT INTO configs VALUES ('aaaa', 'merl (mode=nearest)', 'merl', '0.1.0', 'accuracy', '{\"mode\": \"nearest\"}')")
+    con.execute("INSERT INTO environments VALUES ('e1', 'host', 'cpu', 2, 2, 'basic', 'linux')")
+    rows = []
+    for i, (mat, metric, value, spp) in enumerate((("m1", "l1", 0.1, 0), ("m1", "fit_time", 2.0, 0),
+                                                    ("m2", "l1", 0.2, 0), ("m2", "rmse_hdr", 0.3, 16))):
+        rows.append(("r1", "aaaa", "synthetic", "fp", "material", mat, "plastic", "brdf_space", "", spp, metric, value,
+                     "1/sr", 0, "ok", "", 0, "0.1.0", "abc", float(i), "e1", 1))
+    rows.append(("r1", "aaaa", "synthetic", "fp", "material", "m3", "metal", "brdf_space", "", 0, "error", None, "", 0,
+                 "failed", "boom", 0, "0.1.0", "abc", 9.0, "e1", 1))
+    con.executemany(f"INSERT INTO results VALUES ({', '.join('?' * 22)})", rows)
+    con.commit()
+    con.close()
+    return rows
+
+
+def test_a_v2_store_migrates_to_v3_and_loses_nothing(tmp_path):
+    path = tmp_path / "brdfbench.sqlite"
+    written = _v2(path)
+    store = ResultsStore(path)
+    con = sqlite3.connect(path)
+    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3
+    got = con.execute("SELECT * FROM results ORDER BY rowid").fetchall()
+    con.close()
+    assert [r[:22] for r in got] == written and all(r[22] == "" for r in got)
+    assert [c.label for c in store.configs()] == ["merl (mode=nearest)"]
+    assert store.done_cells("aaaa", "fp") == {"m1", "m2"}
+    # the new key: two rows of one cell and metric that differ in category or distance both fit
+    from dataclasses import replace
+
+    base = next(store.cells())[0]
+    cell = [replace(base, material="set-0", scope="set", metric="mmd", distance=d, category=c)
+            for d in ("l1", "l1_log") for c in ("set", "diffuse")]
+    assert store.write_cell(cell)
+    assert len(store.frame(material="set-0")) == 4
+    ResultsStore(path)  # opening a migrated store again is a no-op

@@ -1,0 +1,211 @@
+"""The generation section of a report: seed 003's Table 1, ours beside the published figures.
+
+Rows are (set metric, distance) pairs in Table 1's order (FID; MMD, COV and 1-NNA over the
+BRDF-space and image-space distances), columns the configurations of generators (the
+training set first, then PCA-A, PCA-N, VAE-A, VAE-N, hyperdiffusion, then others). A figure
+is the mean over the job's independent sample draws with a Student-t 95 % interval over
+them (`distributional.draw_interval`: the variability of the sample draw). Costs (training
+and sampling time, memory, excluded samples) and the seven categories' counts follow.
+
+The published figures (seed 000 Table 4.5 = seed 003 Table 1, 120 test materials) are
+shown in their printed display scale ("×1e2": the figure times 100), ours converted to it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from . import tables
+from .view import Failure
+
+#: Table 1's column order, by generator plugin; others follow by label.
+PLUGIN_ORDER = ("training_set", "pca_brdf", "pca_nbrdf", "vae_brdf", "vae_nbrdf", "hyperdiffusion")
+#: The paper's column for each of our generators (seed 000 Table 4.5).
+PAPER_MODELS = {"training_set": "training set", "pca_brdf": "PCA-A (PCA-brdf)", "pca_nbrdf": "PCA-N (PCA-mlp)",
+                "vae_brdf": "VAE-A (VAE-brdf)", "vae_nbrdf": "VAE-N (VAE-mlp)",
+                "hyperdiffusion": "hyperdiffusion (NeuMaDiff)"}
+PAPER_TABLE = "Table 4.5"
+PAPER_SOURCE = "seed 000"
+DISTANCE_NAMES = {"l1": "BRDF-L1", "l1_log": "BRDF-L1-log", "l1_log_cos": "BRDF-L1-log-cos", "rmse": "RMSE",
+                  "neg_psnr": "-PSNR", "neg_ssim": "-SSIM"}
+#: Display scale of the paper's MMD rows (the printed figure is the value times this).
+MMD_SCALE = {"l1": ("x1e-3", 1e-3), "rmse": ("x1e2", 1e2), "neg_ssim": ("x10", 10.0)}
+METRIC_NAMES = {"mmd": "MMD", "cov": "COV %", "one_nna": "1-NNA %", "fid": "FID"}
+SET_METRICS = ("fid", "mmd", "cov", "one_nna")
+COSTS = {"train_time": "train time (s)", "sample_time": "sample time per draw (s)",
+         "peak_rss_train": "peak memory, train (B)", "peak_rss_eval": "peak memory, scoring (B)",
+         "model_bytes": "generator bytes", "non_finite_samples": "non-finite samples excluded per draw",
+         "samples_scored": "samples scored per draw"}
+CONFIDENCE = 0.95
+SEED_CAVEAT = ("Published: seed 000 Table 4.5 (= seed 003 Table 1; its VAE-N column differs), scored on a "
+               "120-material test set of AugMERL from the 100 MERL measurements, FID on 64-dim Inception features; "
+               "ours on this dataset's split and renders (standard 2048-dim Inception features), so compare "
+               "orderings, not values.")
+
+
+@dataclass(frozen=True)
+class DrawCell:
+    """A figure over sample draws: mean, t interval (None for one draw), draws."""
+
+    value: float
+    lo: float | None
+    hi: float | None
+    n: int
+
+
+@dataclass(frozen=True)
+class Column:
+    config_hash: str
+    label: str
+    plugin: str
+
+
+@dataclass(frozen=True)
+class GenRow:
+    metric: str
+    distance: str
+    label: str  # as Table 1 prints it, with the display scale
+    unit: str
+    higher_is_better: bool | None  # None: no direction (a count)
+    ideal: float | None  # a figure best when closest to this (1-NNA: 50 %); None: by direction
+    scale: float  # ours × scale is what is shown (the paper's display scale)
+    cells: dict[str, DrawCell]  # config hash → our figure (unscaled)
+    published: dict[str, float]  # config hash → the published figure as printed
+
+    def best(self) -> str | None:
+        """The config hash with the best figure (1-NNA: closest to 50 %), None for an undirected row."""
+        if not self.cells:
+            return None
+        if self.ideal is not None:
+            return min(self.cells, key=lambda h: abs(self.cells[h].value - self.ideal))
+        if self.higher_is_better is None:
+            return None
+        sign = -1 if self.higher_is_better else 1
+        return min(self.cells, key=lambda h: sign * self.cells[h].value)
+
+
+@dataclass(frozen=True)
+class GenerationSection:
+    dataset: str
+    fingerprint: str
+    caveat: str
+    columns: list[Column]
+    rows: list[GenRow]
+    costs: list[GenRow]
+    categories: list[GenRow]
+    reference_size: int | None
+    draws: int
+    failures: list[Failure]
+    seed_caveat: str = SEED_CAVEAT
+    kind: str = field(default="generation", init=False)
+
+
+def draw_cell(values: np.ndarray) -> DrawCell:
+    values = np.asarray(values, dtype=float)
+    if values.size < 2 or np.all(values == values[0]):
+        return DrawCell(float(values.mean()), None if values.size < 2 else float(values[0]),
+                        None if values.size < 2 else float(values[0]), int(values.size))
+    from scipy import stats
+
+    mean, sem = float(values.mean()), float(values.std(ddof=1) / math.sqrt(values.size))
+    half = float(stats.t.ppf(0.5 + CONFIDENCE / 2, values.size - 1)) * sem
+    return DrawCell(mean, mean - half, mean + half, int(values.size))
+
+
+def _columns(df: pd.DataFrame) -> list[Column]:
+    configs = df.drop_duplicates("config_hash")
+    cols = [Column(c.config_hash, c.representation, getattr(c, "plugin", "") or "") for c in configs.itertuples()]
+    order = {p: i for i, p in enumerate(PLUGIN_ORDER)}
+    return sorted(cols, key=lambda c: (order.get(c.plugin, len(order)), c.label))
+
+
+def _published() -> dict[tuple[str, str], float]:
+    """(paper model, paper metric) → the printed figure of seed 000 Table 4.5."""
+    from . import published
+
+    out = {}
+    for p in published.figures():
+        if p.source.startswith(PAPER_SOURCE + " ") and p.table.startswith(PAPER_TABLE):
+            out[(p.model, p.metric)] = p.value
+    return out
+
+
+def _paper_metric(metric: str, distance: str) -> tuple[str, float]:
+    """The paper's row name for (metric, distance) and its display scale."""
+    if metric == "fid":
+        return "FID rendered images, Inception dims 64", 1.0
+    name = f"{METRIC_NAMES.get(metric, metric)} {DISTANCE_NAMES.get(distance, distance)}".strip()
+    if metric == "mmd" and distance in MMD_SCALE:
+        suffix, scale = MMD_SCALE[distance]
+        return f"{name} {suffix}", scale
+    return name, 1.0
+
+
+def _row(ok: pd.DataFrame, columns: list[Column], metric: str, distance: str, label: str, scale: float,
+         higher: bool | None, papers: dict[tuple[str, str], float], paper_metric: str | None,
+         category: str | None = None, ideal: float | None = None) -> GenRow | None:
+    got = ok[(ok.metric == metric) & (ok.distance == distance)]
+    if category is not None:
+        got = got[got.category == category]
+    cells, printed = {}, {}
+    for c in columns:
+        mine = got[got.config_hash == c.config_hash].drop_duplicates("material", keep="last")
+        if not mine.empty:
+            cells[c.config_hash] = draw_cell(mine["value"].to_numpy(dtype=float))
+        model = PAPER_MODELS.get(c.plugin)
+        if paper_metric and model and (model, paper_metric) in papers:
+            printed[c.config_hash] = papers[(model, paper_metric)]
+    if not cells:
+        return None
+    unit = str(got["unit"].iloc[0]) if not got.empty else ""
+    return GenRow(metric, distance, label, unit, higher, ideal, scale, cells, printed)
+
+
+def generation_section(key: tuple[str, str, str, str], df: pd.DataFrame) -> GenerationSection:
+    """The generation section of one (dataset, fingerprint) from its set-scope rows (labels unique)."""
+    dataset, fingerprint, _scene, _harness = key
+    df = df.assign(distance=df["distance"] if "distance" in df.columns else "")
+    ok = df[df.status == "ok"]
+    columns = _columns(df)
+    papers = _published()
+    rows = []
+    present = ok[["metric", "distance"]].drop_duplicates()
+    for metric in SET_METRICS:
+        distances = [d for d in DISTANCE_NAMES if ((present.metric == metric) & (present.distance == d)).any()]
+        distances += sorted(set(present[present.metric == metric].distance) - set(distances))
+        for distance in distances:
+            paper_metric, scale = _paper_metric(metric, distance)
+            label = f"{METRIC_NAMES.get(metric, metric)} {DISTANCE_NAMES.get(distance, distance)}".strip()
+            if scale != 1.0:
+                label += f" (×{scale:g})"
+            higher = bool(ok[ok.metric == metric]["higher_is_better"].iloc[0])
+            row = _row(ok, columns, metric, distance, label, scale, higher, papers, paper_metric,
+                       ideal=50.0 if metric == "one_nna" else None)
+            if row is not None:
+                rows.append(row)
+    costs = [r for m, label in COSTS.items()
+             if (r := _row(ok, columns, m, "", label, 1.0, m == "samples_scored", {}, None)) is not None]
+    cats = []
+    counted = ok[ok.metric == "category_count"]
+    for category in _category_order(set(counted.category)):
+        row = _row(ok, columns, "category_count", "", category, 1.0, None, {}, None, category=category)
+        if row is not None:
+            cats.append(row)
+    ref = ok[ok.metric == "reference_materials"]["value"]
+    draws = int(ok.groupby("config_hash")["material"].nunique().max()) if not ok.empty else 0
+    return GenerationSection(dataset, fingerprint, tables.dataset_caveat(dataset), columns, rows, costs, cats,
+                             int(ref.iloc[0]) if not ref.empty else None, draws,
+                             [Failure(f.representation, f.material, str(f.message))
+                              for f in tables.failures(df).itertuples()])
+
+
+def _category_order(present: set[str]) -> list[str]:
+    try:
+        from brdfbench_metrics.categories import CATEGORIES
+    except ImportError:  # the metrics plugin package is optional for reading a store
+        CATEGORIES = ()
+    return [c for c in CATEGORIES if c in present] + sorted(present - set(CATEGORIES))

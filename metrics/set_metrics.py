@@ -1,0 +1,72 @@
+"""Set-level metric plugins: a generated set S scored against a reference set R at once.
+
+`domain = "set"`: computed from the distance matrices of R and S over one distance
+(`compute(d_rr, d_ss, d_rs)`; MMD, COV, 1-NNA of `distributional`); `domain = "image_set"`:
+computed from the two sets' rendered images (`compute(images_r, images_s)`; FID). The
+generation harness calls every set metric of `harness.metrics` through these classes, so a
+third party registers another the same way.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from . import distributional as dist
+
+
+class SetMetric:
+    """A figure of S against R over one distance; `unit_for(distance_unit)` is its stored unit."""
+
+    domain: ClassVar[str] = "set"
+    unit: ClassVar[str] = ""
+    higher_is_better: ClassVar[bool] = False
+
+    def unit_for(self, distance_unit: str) -> str:
+        return self.unit
+
+    def compute(self, d_rr, d_ss, d_rs) -> float:
+        raise NotImplementedError
+
+
+class MMD(SetMetric):
+    """Minimum matching distance: mean over R of the distance to the nearest sample (fidelity)."""
+
+    unit = "distance"
+
+    def unit_for(self, distance_unit: str) -> str:
+        return distance_unit
+
+    def compute(self, d_rr, d_ss, d_rs) -> float:
+        return dist.mmd(d_rs)
+
+
+class COV(SetMetric):
+    """Coverage: the share of R that is some sample's nearest reference member (diversity), in %."""
+
+    unit = "%"
+    higher_is_better = True
+
+    def compute(self, d_rr, d_ss, d_rs) -> float:
+        return 100.0 * dist.cov(d_rs)
+
+
+class OneNNA(SetMetric):
+    """Leave-one-out 1-NN accuracy over R ∪ S, in % (50 is ideal; lower is better down to it)."""
+
+    unit = "% (ideal 50)"
+
+    def compute(self, d_rr, d_ss, d_rs) -> float:
+        return 100.0 * dist.one_nna(d_rr, d_ss, d_rs)
+
+
+class FID:
+    """Fréchet Inception distance between the rendered images of R and S (standard InceptionV3)."""
+
+    domain: ClassVar[str] = "image_set"
+    unit: ClassVar[str] = "1"
+    higher_is_better: ClassVar[bool] = False
+
+    def compute(self, images_r, images_s) -> float:
+        from .fid import fid
+
+        return float(fid(images_r, images_s))
