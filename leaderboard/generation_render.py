@@ -14,8 +14,8 @@ INTRO = ("Each generator is trained on the dataset's training split; each of its
          "is scored against the held-out test split ({ref} materials) as a set. A figure is the mean over the draws "
          "with a {conf} Student-t interval over them; in parentheses, the published figure of the same generator "
          "(seed 000 Table 4.5), in its printed display scale (ours converted to it). ↓ lower is better, ↑ higher "
-         "is better, 1-NNA is best at 50 %. The training set's row is the ceiling: the training split scored as if "
-         "it were a generator.")
+         "is better, 1-NNA is best at 50 %; the best generator's figure is marked. The training set's row is the "
+         "ceiling: the training split scored as if it were a generator (never marked best).")
 
 
 def _intro(s: GenerationSection) -> str:
@@ -54,7 +54,7 @@ def markdown(s: GenerationSection) -> list[str]:
     lines += ["### Unconditional synthesis (seed 003 Table 1)", "", _intro(s), "", f"> {s.seed_caveat}", ""]
     body = []
     for row in s.rows:
-        best = row.best()
+        best = row.best(s.ceilings)
         cells = []
         for c in s.columns:
             text = _text(row.cells.get(c.config_hash), row.scale)
@@ -109,7 +109,7 @@ def _html_table(tid: str, first: str, s: GenerationSection, rows: list[GenRow], 
     head = f'<th class="label">{_e(first)}</th>' + "".join(f"<th><code>{_e(c.label)}</code></th>" for c in s.columns)
     body = []
     for row in rows:
-        best = row.best()
+        best = row.best(s.ceilings)
         cells = "".join(_td(row.cells.get(c.config_hash), row.scale, best == c.config_hash,
                             row.published.get(c.config_hash) if with_paper else None, interval) for c in s.columns)
         label = f"{row.label} {_arrow(row)}".rstrip()

@@ -76,16 +76,18 @@ class GenRow:
     cells: dict[str, DrawCell]  # config hash → our figure (unscaled)
     published: dict[str, float]  # config hash → the published figure as printed
 
-    def best(self) -> str | None:
-        """The config hash with the best figure (1-NNA: closest to 50 %), None for an undirected row."""
-        if not self.cells:
+    def best(self, exclude: frozenset[str] = frozenset()) -> str | None:
+        """The config hash with the best figure (1-NNA: closest to 50 %) among those not in
+        `exclude` (the training set's: a ceiling, not a contender); None for an undirected row."""
+        cells = {h: c for h, c in self.cells.items() if h not in exclude}
+        if not cells:
             return None
         if self.ideal is not None:
-            return min(self.cells, key=lambda h: abs(self.cells[h].value - self.ideal))
+            return min(cells, key=lambda h: abs(cells[h].value - self.ideal))
         if self.higher_is_better is None:
             return None
         sign = -1 if self.higher_is_better else 1
-        return min(self.cells, key=lambda h: sign * self.cells[h].value)
+        return min(cells, key=lambda h: sign * cells[h].value)
 
 
 @dataclass(frozen=True)
@@ -102,6 +104,11 @@ class GenerationSection:
     failures: list[Failure]
     seed_caveat: str = SEED_CAVEAT
     kind: str = field(default="generation", init=False)
+
+    @property
+    def ceilings(self) -> frozenset[str]:
+        """Config hashes of the training-set rows: shown as the ceiling, never marked best."""
+        return frozenset(c.config_hash for c in self.columns if c.plugin == "training_set")
 
 
 def draw_cell(values: np.ndarray) -> DrawCell:

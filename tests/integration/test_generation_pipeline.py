@@ -10,6 +10,7 @@ import torch
 
 from brdfbench import registry
 from brdfbench.errors import ConfigError
+from brdfbench.generator_protocol import TrainingData
 from brdfbench.runner import RunConfig, harness_config, run
 from brdfbench.specs import GeneratorSpec
 from brdfbench.store import ResultsStore
@@ -142,3 +143,15 @@ def test_the_cli_runs_a_generation_sweep_and_reports_it(tmp_path, cli):
     assert "seed 003 Table 1" in page
     bad = cli("harness=generation", "dataset=synthetic", "dataset.params.size=small", "generator=nosuch", cwd=tmp_path)
     assert bad.returncode != 0 and "generator/nosuch" in bad.stderr and "training_set" in bad.stderr
+
+
+def test_check_and_inspect_know_generators(tmp_path, cli):
+    from brdfbench import modelio
+
+    checked = cli("check", "training_set", cwd=tmp_path)
+    assert checked.returncode == 0 and "conformance of 'training_set'" in checked.stdout
+    assert "xfailed  save_load_roundtrip" in checked.stdout
+    gen = TrainingSet().fit(TrainingData(("a", "b"), load=lambda n: None))
+    path = modelio.save_generator(gen, "training_set", tmp_path / "g.safetensors")
+    shown = cli("inspect", str(path), cwd=tmp_path)
+    assert shown.returncode == 0 and "generator 'training_set'" in shown.stdout and "names: ['a', 'b']" in shown.stdout
