@@ -78,3 +78,10 @@ def test_both_renderers_draw_the_section(section):
     page = "\n".join(generation_render.html_section(section, "s0"))
     assert page.count('class="best"') == 3 and "paper 9.22" in page
     assert "Dataset `neumerl`: generators" in markdown.render_view(view.Report("t", "now", [], [], [section], False))
+
+
+def test_one_draw_has_no_interval_and_equal_draws_a_zero_width_one():
+    one = draw_cell(np.array([0.4]))
+    assert (one.value, one.lo, one.hi, one.n) == (0.4, None, None, 1)
+    same = draw_cell(np.array([30.0, 30.0, 30.0]))
+    assert (same.lo, same.hi, same.n) == (30.0, 30.0, 3)
