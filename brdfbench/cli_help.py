@@ -54,6 +54,8 @@ def _summary(resource) -> str:
     except (OSError, UnicodeDecodeError):
         return ""
     for line in lines:
+        if line.startswith("# @package"):  # a Hydra directive, not a description
+            continue
         if line.startswith("#"):
             return line.lstrip("#").strip()
         if line.strip():
@@ -87,7 +89,7 @@ def _group_lines(conf, group: str, default: str | None) -> list[str]:
     for resource in options:
         name = resource.name[: -len(".yaml")]
         summary = _summary(resource)
-        head = f"    {name:20s}"
+        head = f"    {name:20s}" if len(name) < 20 else f"    {name}  "
         lines.append(head + textwrap.shorten(summary, WIDTH - len(head), placeholder=" ...") if summary else head.rstrip())
     return lines
 

@@ -167,6 +167,22 @@ class BlinnPhongKernel(AnalyticKernel):
 # --------------------------------------------------------------------------- neural
 
 
+def dense_layers(x: list, layers: list, activation) -> list:
+    """Dense layers as fused multiply-adds over per-input lists: `layers` holds (columns of
+    opaque weights, opaque biases) per layer, `activation` follows every layer but the last;
+    a None input is a constant 0 and is skipped."""
+    for layer, (cols, bias) in enumerate(layers):
+        out = []
+        for col, b in zip(cols, bias):
+            acc = b
+            for xi, w in zip(x, col):
+                if xi is not None:
+                    acc = dr.fma(xi, w, acc)
+            out.append(acc)
+        x = out if layer == len(layers) - 1 else [activation(v) for v in out]
+    return x
+
+
 class MLPKernel(Kernel):
     """The NBRDF / naive MLP network (brdfbench.nbrdf.network): dense layers with ReLU,
     then expm1(min(z, MAX_LOG_VALUE)) clamped at 0, times the channel scales.
@@ -202,19 +218,78 @@ class MLPKernel(Kernel):
         return [rho_h, None, h.z, d.x, d.y, d.z]
 
     def eval(self, wi, wo):
-        x = self.inputs(wi, wo)
-        for layer, (cols, bias) in enumerate(self.layers):
-            out = []
-            for col, b in zip(cols, bias):
-                acc = b
-                for xi, w in zip(x, col):
-                    if xi is not None:  # the constant 0 input of the Rusinkiewicz encoding
-                        acc = dr.fma(xi, w, acc)
-                out.append(acc)
-            last = layer == len(self.layers) - 1
-            x = out if last else [dr.maximum(v, 0.0) for v in out]
+        x = dense_layers(self.inputs(wi, wo), self.layers, lambda v: dr.maximum(v, 0.0))
         values = []
         for z, scale in zip(x, self.scale):
             z = dr.minimum(z, MAX_LOG_VALUE)
             values.append(dr.select(z > 0, expm1(z), 0.0) * scale)
         return mi.Color3f(*values)
+
+
+# --------------------------------------------------------------------------- tripleplane
+
+
+class TripleplaneKernel(Kernel):
+    """The tripleplane model (triplane_model.py) in drjit: the two texture reads gather from
+    per-material arrays (the difference texture with its pole row broadcast over φ, as the
+    torch read builds it), the decoder's weights are opaque scalars; so materials of one
+    size share one compiled kernel. SiLU is v / (1 + exp(−v)); exp last, clamped."""
+
+    name = "tripleplane"
+
+    def __init__(self, shape, tensors: dict[str, torch.Tensor]):
+        self.shape = shape
+        c_h, c_d = shape.channels
+        r_d, p_d = shape.d_res
+        self.h_tex = mi.Float(tensors["H"].to(torch.float32).reshape(-1).numpy().copy())
+        pole = tensors["D_pole"].to(torch.float32)[None, None, :].expand(1, p_d, c_d)
+        grid = torch.cat((pole, tensors["D"].to(torch.float32)), dim=0)  # (R_d, P_d, C_d)
+        self.d_tex = mi.Float(grid.reshape(-1).numpy().copy())
+        self.layers = []
+        for i in range(1, len(shape.hidden) + 2):
+            w = tensors[f"W{i}"].to(torch.float32).numpy()
+            flat = opaque(w)
+            cols = [[flat[r * w.shape[1] + c] for r in range(w.shape[0])] for c in range(w.shape[1])]
+            self.layers.append((cols, opaque(tensors[f"b{i}"].numpy())))
+
+    @staticmethod
+    def _radial(r, nodes: int):
+        u = dr.clip(r, 0.0, 1.0) * float(nodes - 1)
+        i0 = dr.minimum(dr.floor(u), float(nodes - 2))
+        return mi.UInt32(i0), u - i0
+
+    def _features(self, wi, wo) -> list:
+        c_h, c_d = self.shape.channels
+        r_nodes, p = self.shape.d_res
+        h = half_vector(wi, wo)
+        rho_h = dr.hypot(h.x, h.y)
+        d = to_half_frame(wi, h, rho_h)
+        d = div(d, safe_divisor(dr.norm(d)))
+        out = []
+        i0, t = self._radial(rho_h, self.shape.h_res)
+        for c in range(c_h):
+            a = dr.gather(mi.Float, self.h_tex, i0 * c_h + c)
+            b = dr.gather(mi.Float, self.h_tex, (i0 + 1) * c_h + c)
+            out.append(a + (b - a) * t)
+        phi = dr.atan2(d.y, d.x)
+        phi = phi - math.pi * dr.floor(phi / math.pi)  # φd mod π, in [0, π)
+        v = phi * (p / math.pi)
+        j = dr.floor(v)
+        s = v - j
+        j0 = mi.UInt32(dr.select(j >= p, j - p, j))
+        j0 = dr.select(j0 >= p, j0 - p, j0)
+        j1 = dr.select(j0 + 1 >= p, j0 + 1 - p, j0 + 1)
+        k0, t = self._radial(dr.hypot(d.x, d.y), r_nodes)
+        for c in range(c_d):
+            def at(i, jj):
+                return dr.gather(mi.Float, self.d_tex, (i * p + jj) * c_d + c)
+
+            a0, a1, b0, b1 = at(k0, j0), at(k0, j1), at(k0 + 1, j0), at(k0 + 1, j1)
+            lo = a0 + (a1 - a0) * s
+            hi = b0 + (b1 - b0) * s
+            out.append(lo + (hi - lo) * t)
+        return out
+
+    def eval(self, wi, wo):
+        x = dense_layers(self._features(wi, wo), self.layers, lambda v: v / (1.0 + dr.exp(-v)))
+        return mi.Color3f(*(dr.exp(dr.minimum(g, MAX_LOG_VALUE)) for g in x))

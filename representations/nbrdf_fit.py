@@ -38,6 +38,7 @@ from brdfbench.nbrdf import network as net
 
 SCHEDULES = ("onecycle", "constant")
 OUTPUTS = ("log", "clamped")
+SAMPLINGS = ("uniform", "peak")
 ADAM_BETAS = (0.9, 0.999)
 ADAM_EPS = 1e-7  # Keras' default, as the reference recipe used
 ONECYCLE_WARMUP = 0.1  # fraction of the steps spent warming up
@@ -58,6 +59,7 @@ class Recipe:
     output: str = "log"
     patience: int | None = 2
     min_improvement: float = 5e-3
+    sampling: str = "uniform"  # θh of the training pairs: "uniform", or "peak" (θh = u²·π/2, MERL's spacing)
 
     def __post_init__(self):
         def bad(key, why):
@@ -75,6 +77,8 @@ class Recipe:
             bad("output", f"expected one of {', '.join(OUTPUTS)}")
         if self.patience is not None and (not isinstance(self.patience, int) or self.patience < 1):
             bad("patience", "must be a positive integer, or null for no early stop")
+        if self.sampling not in SAMPLINGS:
+            bad("sampling", f"expected one of {', '.join(SAMPLINGS)}")
 
 
 #: The published recipe of Sztrajman et al. (2021): Adam 5e-4, minibatch 512, 100 epochs,
@@ -91,10 +95,13 @@ class Samples:
     cells: torch.Tensor  # (S,) flat MERL cell index of each pair (nearest cell, as the reference)
 
 
-def draw_samples(n: int, features: str, seed: int) -> Samples:
-    """n pairs uniform in (θh, θd, φd) (and φh, for direction inputs), above-horizon ones kept."""
+def draw_samples(n: int, features: str, seed: int, sampling: str = "uniform") -> Samples:
+    """n pairs uniform in (θd, φd) (and φh, for direction inputs), above-horizon ones kept;
+    θh uniform, or for sampling="peak" θh = u²·π/2 with u uniform (the MERL grid's spacing:
+    about 8 % of the drawn pairs within 0.01 rad of the specular peak instead of 0.6 %)."""
     g = torch.Generator().manual_seed(seed)
-    theta_h = torch.rand(n, generator=g, dtype=torch.float64) * (math.pi / 2)
+    u = torch.rand(n, generator=g, dtype=torch.float64)
+    theta_h = (u * u if sampling == "peak" else u) * (math.pi / 2)
     theta_d = torch.rand(n, generator=g, dtype=torch.float64) * (math.pi / 2)
     phi_d = torch.rand(n, generator=g, dtype=torch.float64) * (2 * math.pi)
     phi_h = torch.rand(n, generator=g, dtype=torch.float64) * (2 * math.pi)
@@ -234,7 +241,7 @@ def fit_batched(
         if list(w) != names or net.hidden_of(w) != hidden:
             raise ValueError("every initial weight dict must have the same layout")
     if samples is None:
-        samples = draw_samples(recipe.n_samples, features, sample_seed)
+        samples = draw_samples(recipe.n_samples, features, sample_seed, recipe.sampling)
     n_samples = samples.x.shape[0]
     log_targets, valid = zip(*(targets(t, samples, scale) for t in tables))
     y = torch.stack(log_targets)  # (M, S, 3)

@@ -52,3 +52,10 @@ NAIVE_MLP = RepresentationSpec(
     tags=frozenset({"fittable", "neural"}),
     check_params={"epochs": 2, "n_samples": 100_000},  # the kit's quick run: a short fit
 )
+TRIPLEPLANE = RepresentationSpec(
+    name="tripleplane",
+    description="Tripleplane (Xu et al. 2024, seed 002's baseline): radial h and polar d latent textures, SiLU MLP to log f",
+    target="brdfbench_representations.triplane:Tripleplane",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "neural"}),
+    check_params={"epochs": 2, "n_samples": 60_000},  # the kit's quick run: a short fit
+)

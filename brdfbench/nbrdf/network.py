@@ -21,7 +21,7 @@ from typing import Mapping
 
 import torch
 
-from .. import coords, merl
+from .. import coords, flops, merl
 
 FEATURES = ("rusinkiewicz", "directions")
 N_INPUTS = 6
@@ -146,9 +146,7 @@ def forward(weights: Mapping, x: torch.Tensor, output_scale: torch.Tensor | None
 def mlp_flops(hidden) -> int:
     """Arithmetic per evaluation of the network alone: multiply-adds, biases, ReLUs, expm1,
     clamp and channel scale."""
-    sizes = layer_sizes(hidden)
-    dense = sum(2 * a * b + b for a, b in zip(sizes[:-1], sizes[1:]))
-    return dense + sum(hidden) + 3 * N_OUTPUTS
+    return flops.mlp(layer_sizes(hidden), "relu") + 3 * N_OUTPUTS
 
 
 # --------------------------------------------------------------------------- the network

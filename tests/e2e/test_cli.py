@@ -161,6 +161,8 @@ def test_help_lists_subcommands_config_groups_and_their_options(tmp_path, cli):
         for option in (r.name[:-5] for r in (conf / group).iterdir() if r.name.endswith(".yaml")):
             assert f"\n    {option} " in out.stdout, (group, option)
     assert "brdfbench representation=lambert" in out.stdout and "--hydra-help" in out.stdout
+    assert "@package" not in out.stdout  # a Hydra directive is not a config's description
+    assert "    naive_mlp_equal_flops  naive_mlp at" in out.stdout  # a long name keeps its gap
     assert not (tmp_path / "results").exists()
 
 

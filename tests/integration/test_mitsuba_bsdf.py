@@ -24,7 +24,7 @@ from brdfbench.testing.kit import reference_material
 pytestmark = pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="llvm_ad_rgb needs libLLVM >= 19")
 
 #: Built-ins that must render through a native drjit kernel.
-NATIVE = ("merl", "pca", "lambert", "blinn_phong", "cook_torrance", "ggx", "nbrdf", "naive_mlp")
+NATIVE = ("merl", "pca", "lambert", "blinn_phong", "cook_torrance", "ggx", "nbrdf", "naive_mlp", "tripleplane")
 #: Cheap fitting parameters: the adapter is under test here, not the fit.
 CHEAP = {
     "blinn_phong": {"n_samples": 512, "restarts": 1},
@@ -75,14 +75,27 @@ def darker_material():
 def make_model(fitted, name: str):
     """A model of `name` fitted to synthetic material 1 (the session's shared fit; neural
     ones: random weights, the adapter is under test here, not the fit)."""
-    if name in ("nbrdf", "naive_mlp"):
+    if name in ("nbrdf", "naive_mlp", "tripleplane"):
         return _random(name)
     return fitted(name, train=[reference_material(), darker_material()], **CHEAP.get(name, {}))
 
 
+def random_tripleplane(model, seed: int):
+    """A tripleplane with random textures and decoder (varied outputs): no fit needed. The
+    textures vary by 0.1 between nodes, as smooth as a fitted one's; rougher ones turn fp32
+    rounding of the read coordinates into larger differences than the test allows."""
+    g = torch.Generator().manual_seed(seed)
+    state = {k: torch.randn(s, generator=g) * (0.1 if k in ("H", "D", "D_pole") else 0.5)
+             for k, s in model.shape.tensor_shapes().items()}
+    return type(model).from_state(model.params, state, {})
+
+
 @functools.lru_cache(maxsize=None)
 def _random(name: str):
-    return random_mlp(registry.get("representations", name).create(), seed=len(name))
+    model = registry.get("representations", name).create()
+    if name == "tripleplane":
+        return random_tripleplane(model, seed=len(name))
+    return random_mlp(model, seed=len(name))
 
 
 def directions(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -272,10 +285,12 @@ def _render_kernel(mi, mb, bsdf: dict) -> tuple[str, bool]:
     return biggest["hash"], bool(biggest["cache_hit"])
 
 
-@pytest.mark.parametrize("name", ["merl", "nbrdf", "ggx"])
+@pytest.mark.parametrize("name", ["merl", "nbrdf", "ggx", "tripleplane"])
 def test_second_material_reuses_the_kernel(mi, mb, name, fitted):
     first = make_model(fitted, name)
-    if name == "merl":
+    if name == "tripleplane":
+        second = random_tripleplane(type(first)(), seed=99)
+    elif name == "merl":
         second = type(first)().fit(darker_material())
     elif name == "ggx":
         second = type(first)().set_coefficients(kd=0.1, ks=0.7, alpha=0.05, f0=0.9)

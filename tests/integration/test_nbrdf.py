@@ -422,3 +422,16 @@ def test_a_failed_batch_fails_its_materials_and_the_sweep_goes_on(tmp_path, synt
     failed = df[df.status == "failed"]
     assert (counts["done"], counts["failed"]) == (2, 4)
     assert set(failed.material) == set(calls[0]) and failed.message.str.contains("out of patience").all()
+
+
+# --------------------------------------------------------------------------- training pairs
+
+
+def test_peak_sampling_puts_pairs_at_the_specular_peak():
+    uniform = draw_samples(200_000, "rusinkiewicz", seed=1)
+    peak = draw_samples(200_000, "rusinkiewicz", seed=1, sampling="peak")
+    near = [float((torch.asin(s.x[:, 0].clamp(max=1)) < 0.01).float().mean()) for s in (uniform, peak)]
+    assert near[0] == pytest.approx(0.01, rel=0.2)  # of the pairs above the horizon
+    assert near[1] > 5 * near[0]
+    with pytest.raises(ConfigError, match="sampling"):
+        Recipe(sampling="cosine")

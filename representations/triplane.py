@@ -1,0 +1,166 @@
+"""`tripleplane` (Xu et al. 2024; the baseline of seed 002): latent textures over the half and
+difference vectors decoded by a small SiLU MLP to log f (the arithmetic: triplane_model.py;
+the batched fit: triplane_fit.py).
+
+Isotropic and reciprocal by construction (the half texture is radial; the difference
+texture is read with φd mod π). Fitted `batch_materials` materials at a time; a material's
+initial state is drawn from the run seed and its name, so its fit does not depend on its
+batch-mates.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Sequence
+
+import torch
+
+from brdfbench.errors import ConfigError, ModelFileError
+from brdfbench.protocol import FIT_LOSS_KEY, Material, Representation
+
+from . import triplane_fit as tf
+from . import triplane_model as tm
+from .nbrdf import material_seed
+
+DEFAULTS = {"h_res": 64, "d_res": (32, 32), "channels": (8, 8), "hidden": (16,)}
+#: A texture larger than this many floats per material is refused before allocation.
+MAX_TEXTURE_FLOATS = 64 * 2**20
+
+
+def _ints(name: str, value, length: int | None, minimum: int) -> tuple[int, ...]:
+    """`value` (an integer or a list of them) as a tuple, or a ConfigError naming the key."""
+    items = list(value) if isinstance(value, (list, tuple)) else [value]
+    shape = f"{length} integer(s)" if length else "a non-empty list of integers"
+    ok = bool(items) and (length is None or len(items) == length) and all(
+        isinstance(v, int) and not isinstance(v, bool) and v >= minimum for v in items)
+    if not ok:
+        raise ConfigError(f"tripleplane: {name}={value!r} must be {shape}, each ≥ {minimum}")
+    return tuple(items)
+
+
+class Tripleplane(Representation):
+    """Radial half texture (h_res nodes × C_h), polar difference texture (d_res = radial × φ
+    nodes, × C_d), SiLU decoder (hidden) to log f."""
+
+    tags: ClassVar[frozenset[str]] = frozenset({"isotropic", "reciprocal", "fittable", "neural"})
+    plugin_name: ClassVar[str] = "tripleplane"
+
+    def __init__(self, h_res: int = DEFAULTS["h_res"], d_res: Sequence[int] = DEFAULTS["d_res"],
+                 channels: Sequence[int] = DEFAULTS["channels"], hidden: Sequence[int] = DEFAULTS["hidden"],
+                 epochs: int = tf.Recipe.epochs, batch_size: int = tf.Recipe.batch_size,
+                 n_samples: int = tf.Recipe.n_samples, lr: float = tf.Recipe.lr,
+                 texture_lr: float = tf.Recipe.texture_lr, loss: str = tf.Recipe.loss, beta1: float = tf.Recipe.beta1,
+                 ema: float | None = tf.Recipe.ema, precondition: float = tf.Recipe.precondition,
+                 init_scale: float = tf.Recipe.init_scale, batch_materials: int = 16):
+        (h,) = _ints("h_res", h_res, 1, 2)
+        d = _ints("d_res", d_res, 2, 2)
+        c = _ints("channels", channels, 2, 1)
+        hid = _ints("hidden", hidden, None, 1)
+        self.shape = tm.Shape(h_res=h, d_res=(d[0], d[1]), channels=(c[0], c[1]), hidden=hid)
+        if self.shape.texture_floats() > MAX_TEXTURE_FLOATS:
+            raise ConfigError(f"tripleplane: h_res={h}, d_res={list(d)}, channels={list(c)} need "
+                              f"{self.shape.texture_floats():,} texture floats per material, more than the "
+                              f"{MAX_TEXTURE_FLOATS:,} allowed")
+        if not isinstance(batch_materials, int) or isinstance(batch_materials, bool) or batch_materials < 1:
+            raise ConfigError(f"tripleplane: batch_materials={batch_materials!r} must be a positive integer")
+        self.recipe = tf.Recipe(epochs=epochs, batch_size=batch_size, n_samples=n_samples, lr=lr,
+                                texture_lr=texture_lr, loss=loss, beta1=beta1, ema=ema, precondition=precondition,
+                                init_scale=init_scale)
+        super().__init__(h_res=h, d_res=list(d), channels=list(c), hidden=list(hid), epochs=epochs,
+                         batch_size=batch_size, n_samples=n_samples, lr=lr, texture_lr=texture_lr, loss=loss,
+                         beta1=beta1, ema=ema, precondition=precondition, init_scale=init_scale,
+                         batch_materials=batch_materials)
+        self.batch_materials = batch_materials
+        self.tensors: dict[str, torch.Tensor] | None = None
+        self.fit_info: dict[str, Any] = {}
+
+    # -- fitting -----------------------------------------------------------------
+    @property
+    def fit_batch_size(self) -> int:
+        return self.batch_materials
+
+    def fit(self, target: Material, *, seed: int = 0) -> "Tripleplane":
+        fitted = self.fit_many([target], seed=seed)[0]
+        self.tensors, self.fit_info = fitted.tensors, fitted.fit_info
+        return self
+
+    def fit_many(self, targets: Sequence[Material], *, seed: int = 0, progress: bool | str = False) -> list["Tripleplane"]:
+        targets = list(targets)
+        models: list[Tripleplane] = []
+        for start in range(0, len(targets), self.batch_materials):
+            group = targets[start:start + self.batch_materials]
+            outcomes = tf.fit_batched([t.table for t in group], [material_seed(seed, t.name) for t in group],
+                                      self.shape, self.recipe, sample_seed=seed, progress=progress)
+            for target, outcome in zip(group, outcomes):
+                model = type(self)(**self.params)
+                model.tensors = outcome.tensors
+                model.fit_info = {FIT_LOSS_KEY: outcome.loss, "fitted_to": target.name,
+                                  "training_curve": outcome.curve}
+                models.append(model)
+        return models
+
+    # -- evaluation ----------------------------------------------------------------
+    def _eval(self, wi, wo):
+        if self.tensors is None:
+            raise RuntimeError(f"{self.plugin_name}: evaluate after fit() or load")
+        r_h, r_d, phi = tm.texture_coords(wi, wo)
+        dtype = wi.dtype
+        stacked = {k: (v.to(dtype)[None, None] if k.startswith("b") else v.to(dtype)[None])
+                   for k, v in self.tensors.items()}
+        g = tm.log_value(stacked, len(self.shape.hidden) + 1, r_h, r_d, phi)[0]
+        return tm.to_value(g)
+
+    def drjit_kernel(self):
+        """The model in drjit operations (brdfbench.render), for this exact class only."""
+        if type(self) is not Tripleplane or self.tensors is None:
+            return None
+        from .drjit_kernels import TripleplaneKernel
+
+        return TripleplaneKernel(self.shape, self.tensors)
+
+    # -- persistence and cost -----------------------------------------------------------
+    def state_dict(self):
+        return {} if self.tensors is None else dict(self.tensors)
+
+    def metadata(self):
+        return dict(self.fit_info)
+
+    @classmethod
+    def from_state(cls, params, tensors, metadata):
+        model = cls(**params)
+        model.params = {k: model.params[k] for k in params}
+        if tensors:
+            model.tensors = _checked(tensors, model.shape, cls.plugin_name)
+        model.fit_info = dict(metadata)
+        return model
+
+    @property
+    def nbytes(self) -> int:
+        return 4 * (self.shape.texture_floats() + self.shape.mlp_floats())
+
+    @property
+    def texture_nbytes(self) -> int:
+        return 4 * self.shape.texture_floats()
+
+    @property
+    def flops_per_eval(self) -> int:
+        return self.shape.flops()
+
+
+def _checked(tensors, shape: tm.Shape, name: str) -> dict[str, torch.Tensor]:
+    """float32 copies of a model file's tensors, or a ModelFileError naming the tensor."""
+    out = {}
+    expected = shape.tensor_shapes()
+    extra = sorted(set(tensors) - set(expected))
+    if extra:
+        raise ModelFileError(f"{name} model has unexpected tensors {extra}; expected {sorted(expected)}")
+    for key, want in expected.items():
+        if key not in tensors:
+            raise ModelFileError(f"{name} model lacks tensor {key!r}")
+        t = torch.as_tensor(tensors[key]).detach()
+        if tuple(t.shape) != want:
+            raise ModelFileError(f"{name} model tensor {key!r} has shape {tuple(t.shape)}, expected {want} "
+                                 "from the model's params")
+        if not t.dtype.is_floating_point or not torch.isfinite(t).all():
+            raise ModelFileError(f"{name} model tensor {key!r} holds NaN or Inf, or is not floating point")
+        out[key] = t.to(torch.float32).clone()
+    return out

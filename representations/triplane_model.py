@@ -1,0 +1,144 @@
+"""The tripleplane model's arithmetic (Xu et al. 2024, as seed 002 Eq. 5 and Sec. 3 describe
+it): latent textures over the disk-projected half and difference vectors, read with
+interpolation, their features concatenated and decoded by a small SiLU MLP to log f.
+
+Every function works on a stack of M materials (textures (M, …), weights (M, in, out)) and
+a batch of B direction pairs shared by all of them, so one code path serves evaluation
+(M = 1) and batched fitting.
+
+Coordinates: a disk-projected unit vector ω has r = |ω⊥| = sin θ and φ = atan2(ω⊥y, ω⊥x).
+- The half texture is radial, over r_h = sin θh: the model is isotropic, as NBRDF's
+  encoding is (φh dropped); MERL and RGL-isotropic materials do not depend on φh.
+- The difference texture is polar, over r_d = sin θd and φ = φd mod π: swapping ωi and ωo
+  turns d into (−dx, −dy, dz), φd into φd + π, so the read is reciprocal by construction.
+- Radial nodes sit at r = i / (R − 1): node 0 is the pole, one vector for every φ (the
+  paper's "repeat padding in r, broadcasting the first element for all φ"), so the read is
+  continuous where φ is undefined. The φ axis has P nodes at φ = j·π / P, read circularly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+
+from brdfbench import coords, flops
+from brdfbench.nbrdf.network import MAX_LOG_VALUE
+
+N_OUTPUTS = 3
+D_PERIOD = math.pi  # φd is read modulo π
+#: Coordinate arithmetic per pair: half vector 12, ωi rotated into its frame 18, r_h and
+#: r_d (hypot) 3 each, φd (atan2) 1 and its wrap 2.
+COORD_FLOPS = 12 + 18 + 3 + 3 + 1 + 2
+
+
+@dataclass(frozen=True)
+class Shape:
+    """Sizes of a tripleplane model."""
+
+    h_res: int  # radial nodes of the half texture
+    d_res: tuple[int, int]  # (radial nodes, φ nodes) of the difference texture
+    channels: tuple[int, int]  # feature channels (C_h, C_d)
+    hidden: tuple[int, ...]  # the decoder's hidden widths
+
+    @property
+    def layer_sizes(self) -> list[int]:
+        return [sum(self.channels), *self.hidden, N_OUTPUTS]
+
+    def tensor_shapes(self) -> dict[str, tuple[int, ...]]:
+        """name → shape of one material's tensors."""
+        c_h, c_d = self.channels
+        r_d, p_d = self.d_res
+        out = {"H": (self.h_res, c_h), "D_pole": (c_d,), "D": (r_d - 1, p_d, c_d)}
+        sizes = self.layer_sizes
+        for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:]), start=1):
+            out[f"W{i}"] = (a, b)
+            out[f"b{i}"] = (b,)
+        return out
+
+    def texture_floats(self) -> int:
+        c_h, c_d = self.channels
+        r_d, p_d = self.d_res
+        return self.h_res * c_h + c_d * (1 + (r_d - 1) * p_d)
+
+    def mlp_floats(self) -> int:
+        sizes = self.layer_sizes
+        return sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:]))
+
+    def flops(self) -> int:
+        """Per evaluation, by brdfbench.flops' rules: coordinates, one linear and one bilinear
+        texture read, the SiLU decoder, exp and its clamp per channel."""
+        c_h, c_d = self.channels
+        return (COORD_FLOPS + flops.linear_read(c_h) + flops.bilinear_read(c_d)
+                + flops.mlp(self.layer_sizes, "silu") + 2 * N_OUTPUTS)
+
+
+def texture_coords(wi: torch.Tensor, wo: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(r_h, r_d, φd mod π) of direction pairs, in their dtype."""
+    hd = coords.to_half_diff(wi, wo)
+    return coords_from_angles(hd.theta_h, hd.theta_d, hd.phi_d)
+
+
+def coords_from_angles(theta_h, theta_d, phi_d):
+    """(r_h, r_d, φ) from Rusinkiewicz angles."""
+    return torch.sin(theta_h), torch.sin(theta_d), torch.remainder(phi_d, D_PERIOD)
+
+
+def _radial(r: torch.Tensor, nodes: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Lower node index (B,) and fraction (B,) of r ∈ [0, 1] on `nodes` nodes."""
+    u = (r.clamp(0.0, 1.0) * (nodes - 1))
+    i0 = torch.floor(u).clamp(max=nodes - 2)
+    return i0.long(), u - i0
+
+
+def read_radial(tex: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
+    """(M, B, C) features of a radial texture (M, R, C) at r (B,), linear between nodes."""
+    i0, t = _radial(r, tex.shape[1])
+    t = t.to(tex.dtype)[None, :, None]
+    a, b = tex.index_select(1, i0), tex.index_select(1, i0 + 1)
+    return a + (b - a) * t
+
+
+def read_polar(pole: torch.Tensor, rings: torch.Tensor, r: torch.Tensor, phi: torch.Tensor,
+               period: float = D_PERIOD) -> torch.Tensor:
+    """(M, B, C) features of a polar texture at (r, φ): pole (M, C) at r = 0, rings
+    (M, R − 1, P, C) at r = i/(R − 1), i ≥ 1; bilinear, circular in φ."""
+    m, n_rings, p, c = rings.shape
+    grid = torch.cat((pole[:, None, None, :].expand(m, 1, p, c), rings), dim=1).reshape(m, (n_rings + 1) * p, c)
+    i0, t = _radial(r, n_rings + 1)
+    v = torch.remainder(phi, period) * (p / period)
+    j = torch.floor(v)
+    s = (v - j).to(rings.dtype)[None, :, None]
+    j0 = torch.remainder(j.long(), p)
+    j1 = torch.remainder(j0 + 1, p)
+    t = t.to(rings.dtype)[None, :, None]
+    def at(i, j):  # index_select: its gradient accumulates in a fixed order (deterministic on threads)
+        return grid.index_select(1, i * p + j)
+
+    a0, a1, b0, b1 = at(i0, j0), at(i0, j1), at(i0 + 1, j0), at(i0 + 1, j1)
+    lo = a0 + (a1 - a0) * s
+    hi = b0 + (b1 - b0) * s
+    return lo + (hi - lo) * t
+
+
+def decode(weights: list[tuple[torch.Tensor, torch.Tensor]], x: torch.Tensor) -> torch.Tensor:
+    """log f (M, B, 3) from features x (M, B, C): dense layers (M, in, out) + (M, 1, out), SiLU between."""
+    h = x
+    for k, (w, b) in enumerate(weights):
+        h = torch.baddbmm(b, h, w)
+        if k < len(weights) - 1:
+            h = torch.nn.functional.silu(h)
+    return h
+
+
+def log_value(tensors: dict[str, torch.Tensor], n_layers: int, r_h, r_d, phi) -> torch.Tensor:
+    """log f (M, B, 3) of stacked tensors (every name with a leading M axis; biases (M, 1, out))."""
+    feats = torch.cat((read_radial(tensors["H"], r_h), read_polar(tensors["D_pole"], tensors["D"], r_d, phi)), dim=-1)
+    layers = [(tensors[f"W{i}"], tensors[f"b{i}"]) for i in range(1, n_layers + 1)]
+    return decode(layers, feats)
+
+
+def to_value(g: torch.Tensor) -> torch.Tensor:
+    """f = exp(g), the exponential last; clamped so fp32 stays finite."""
+    return torch.exp(torch.clamp(g, max=MAX_LOG_VALUE))

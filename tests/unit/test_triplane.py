@@ -1,0 +1,163 @@
+"""The tripleplane model: texture reads (pole, circular φ, exact at nodes, linear between),
+reciprocity and isotropy by construction, the blur preconditioner, FLOPs by the project's
+counter, batch-mate independence of the fit, and bad input naming the key or tensor."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from brdfbench import flops, modelio
+from brdfbench.errors import ConfigError, ModelFileError
+from brdfbench.protocol import Material
+from brdfbench_representations import triplane_fit as tf
+from brdfbench_representations import triplane_model as tm
+from brdfbench_representations.triplane import Tripleplane
+
+SMALL = {"h_res": 8, "d_res": [6, 10], "channels": [3, 4], "hidden": [5]}
+
+
+def _random_model(seed: int = 0, **params) -> Tripleplane:
+    model = Tripleplane(**{**SMALL, **params})
+    g = torch.Generator().manual_seed(seed)
+    state = {k: torch.randn(s, generator=g) * 0.5 for k, s in model.shape.tensor_shapes().items()}
+    return Tripleplane.from_state(model.params, state, {})
+
+
+def _pairs(n: int, seed: int, dtype=torch.float64):
+    g = torch.Generator().manual_seed(seed)
+    v = torch.randn(2, n, 3, generator=g, dtype=dtype)
+    v[..., 2] = v[..., 2].abs() + 0.05
+    v = v / v.norm(dim=-1, keepdim=True)
+    return v[0], v[1]
+
+
+def test_the_pole_is_one_vector_for_every_phi():
+    pole, rings = torch.randn(1, 4), torch.randn(1, 5, 7, 4)
+    phi = torch.linspace(0, 3.0, 9)
+    out = tm.read_polar(pole, rings, torch.zeros(9), phi)
+    assert torch.allclose(out, pole[:, None, :].expand(1, 9, 4))
+    near = tm.read_polar(pole, rings, torch.full((9,), 1e-7), phi)
+    assert torch.allclose(near, out, atol=1e-5)  # continuous at the pole
+
+
+def test_phi_is_circular_with_period_pi_and_nodes_are_exact():
+    pole, rings = torch.randn(2, 3, dtype=torch.float64), torch.randn(2, 4, 6, 3, dtype=torch.float64)
+    r = torch.tensor([1 / 4, 2 / 4, 1.0], dtype=torch.float64)  # rings 1, 2, 4 of nodes at i/4
+    for j in range(6):
+        phi = torch.full((3,), j * math.pi / 6, dtype=torch.float64)
+        got = tm.read_polar(pole, rings, r, phi)
+        assert torch.allclose(got, rings[:, [0, 1, 3], j], atol=1e-12)
+        assert torch.allclose(tm.read_polar(pole, rings, r, phi + math.pi), got, atol=1e-12)
+    # just below π blends the last φ node into node 0 (circular padding)
+    phi = torch.full((3,), math.pi - 1e-12, dtype=torch.float64)
+    assert torch.allclose(tm.read_polar(pole, rings, r, phi), rings[:, [0, 1, 3], 0], atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(r=st.floats(0, 1), phi=st.floats(0, 2 * math.pi, exclude_max=True))
+def test_reads_are_bilinear_between_the_four_nodes_around(r, phi):
+    torch.manual_seed(0)
+    pole, rings = torch.randn(1, 2, dtype=torch.float64), torch.randn(1, 3, 5, 2, dtype=torch.float64)
+    grid = torch.cat((pole[:, None, None].expand(1, 1, 5, 2), rings), dim=1)[0]  # (4, 5, 2)
+    u, v = r * 3, (phi % math.pi) / math.pi * 5
+    i, j = min(int(u), 2), int(v) % 5
+    t, s = u - i, v - math.floor(v)
+    want = ((1 - t) * ((1 - s) * grid[i, j] + s * grid[i, (j + 1) % 5])
+            + t * ((1 - s) * grid[i + 1, j] + s * grid[i + 1, (j + 1) % 5]))
+    got = tm.read_polar(pole, rings, torch.tensor([r], dtype=torch.float64), torch.tensor([phi], dtype=torch.float64))
+    assert torch.allclose(got[0, 0], want, atol=1e-9)
+
+
+def test_a_model_is_reciprocal_and_isotropic_by_construction():
+    model = _random_model()
+    wi, wo = _pairs(4000, 1)
+    a = model.eval(wi, wo)
+    assert torch.allclose(a, model.eval(wo, wi), rtol=1e-9, atol=0)
+    c, s = math.cos(1.1), math.sin(1.1)
+    rot = torch.tensor([[c, -s, 0], [s, c, 0], [0, 0, 1]], dtype=torch.float64)
+    assert torch.allclose(a, model.eval(wi @ rot.T, wo @ rot.T), rtol=1e-8, atol=0)
+    assert torch.isfinite(a).all() and (a > 0).all()
+
+
+def test_blur_is_an_invertible_preconditioner_that_keeps_constants():
+    w = tf.blur_weights((8, 12), 5.0)
+    assert w[0, 0] == 1 and (w > 0).all() and (w <= 1).all()
+    const = torch.full((2, 8, 12, 3), 0.7)
+    assert torch.allclose(tf.blur(const, w, (1, 2)), const, atol=1e-6)
+    x = torch.randn(2, 8, 12, 3)
+    y = tf.blur(x, w, (1, 2))
+    back = torch.fft.ifftn(torch.fft.fftn(y, dim=(1, 2)) / w[None, :, :, None], dim=(1, 2)).real
+    assert torch.allclose(back, x, atol=1e-4) and y.std() < x.std()
+
+
+def test_flops_follow_the_project_counter_and_the_default_is_equal_flop():
+    model = Tripleplane()
+    c_h, c_d = model.shape.channels
+    want = (tm.COORD_FLOPS + flops.linear_read(c_h) + flops.bilinear_read(c_d)
+            + flops.mlp([c_h + c_d, 16, 3], "silu") + 6)
+    assert model.flops_per_eval == want
+    assert 800 <= model.flops_per_eval <= 900  # seed 002 Table 3's band
+    assert model.nbytes == 4 * (64 * 8 + 8 * (1 + 31 * 32) + (16 * 16 + 16) + (16 * 3 + 3))
+
+
+def test_fit_does_not_depend_on_batch_mates_and_beats_a_constant(sharp_materials):
+    params = {**SMALL, "epochs": 3, "n_samples": 40_000, "batch_size": 2048}
+    alone = Tripleplane(**params).fit(sharp_materials[0], seed=3)
+    together = Tripleplane(**params).fit_many(sharp_materials, seed=3)[0]
+    for k, t in alone.tensors.items():
+        assert torch.allclose(t, together.tensors[k], rtol=1e-4, atol=1e-5), k
+    curve = alone.fit_info["training_curve"]
+    assert len(curve) == 3 and curve[-1] < curve[0]
+
+
+def test_save_and_load_round_trip(tmp_path):
+    model = _random_model(seed=4)
+    path = tmp_path / "tp.safetensors"
+    modelio.save(model, "tripleplane", path)
+    name, loaded = modelio.load(path)
+    assert name == "tripleplane" and loaded.params == model.params
+    wi, wo = _pairs(100, 5, torch.float32)
+    assert torch.equal(loaded.eval(wi, wo), model.eval(wi, wo))
+
+
+@pytest.mark.parametrize("key,value", [("h_res", 0), ("h_res", -3), ("d_res", [32]), ("d_res", [0, 8]),
+                                       ("channels", [8, -1]), ("hidden", []), ("h_res", 2.5), ("d_res", "big"),
+                                       ("d_res", [100_000, 100_000])])
+def test_bad_sizes_name_the_key(key, value):
+    with pytest.raises(ConfigError, match=key):
+        Tripleplane(**{key: value})
+
+
+@pytest.mark.parametrize("key,value", [("loss", "l2"), ("ema", 2.0), ("lr", 0), ("precondition", -1.0), ("epochs", 0)])
+def test_bad_recipe_names_the_key(key, value):
+    with pytest.raises(ConfigError, match=key):
+        Tripleplane(**{key: value})
+
+
+def test_loaded_tensors_are_checked():
+    model = _random_model()
+    state = model.state_dict()
+    bad = dict(state, D=state["D"].clone())
+    bad["D"][0, 0, 0] = float("nan")
+    with pytest.raises(ModelFileError, match="'D'"):
+        Tripleplane.from_state(model.params, bad, {})
+    with pytest.raises(ModelFileError, match="'H'.*shape"):
+        Tripleplane.from_state(model.params, dict(state, H=torch.zeros(3, 3)), {})
+    with pytest.raises(ModelFileError, match="unexpected"):
+        Tripleplane.from_state(model.params, dict(state, extra=torch.zeros(1)), {})
+
+
+@pytest.fixture(scope="module")
+def sharp_materials():
+    from brdfbench.data.synthetic import generate_material
+
+    out = []
+    for i in (1, 0):  # a chrome metal and a plastic
+        name, category, table = generate_material(i, seed=0)
+        out.append(Material(name=name, table=table, category=category))
+    return out
