@@ -109,15 +109,29 @@ def _cos_theta_i() -> np.ndarray:
     return wi[:, 2].clamp_min(0).numpy()
 
 
-def _transform(kind: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+def _transform(kind: str) -> Callable[[np.ndarray, np.ndarray | None, np.ndarray], None]:
+    """transform(f (3, K), cos (K,) or None, out (3, K)): the values a distance compares,
+    written into `out` (a row of the stacked chunk: no intermediate copy)."""
+    def log_in_place(out):
+        t = torch.from_numpy(out)  # torch's log1p: vectorised and on both cores, about 4x numpy's here
+        torch.log1p(t, out=t)
+
     if kind == "l1":
-        return lambda f, c: f
-    # torch's log1p: vectorised and on both cores, about 4x numpy's here
+        return lambda f, c, out: np.copyto(out, f)
     if kind == "l1_log":
-        return lambda f, c: torch.from_numpy(np.ascontiguousarray(f)).log1p().numpy()
+        return lambda f, c, out: (np.copyto(out, f), log_in_place(out))
     if kind == "l1_log_cos":
-        return lambda f, c: torch.from_numpy(f * c).log1p().numpy()
+        return lambda f, c, out: (np.multiply(f, c, out=out), log_in_place(out))
     raise ValueError(f"unknown BRDF distance {kind!r}: one of {', '.join(KINDS)}")
+
+
+def _stacked(raw: list[np.ndarray], sel, c, transform) -> np.ndarray:
+    """(members, 3·K) float64: each member's chunk at `sel`, transformed, one row each."""
+    k = raw[0].shape[1] if isinstance(sel, slice) else int(np.count_nonzero(sel))
+    out = np.empty((len(raw), 3 * k), dtype=np.float64)
+    for row, v in zip(out, raw):
+        transform(v[:, sel], c, row.reshape(3, k))
+    return out
 
 
 def common_valid_cells(*sets: Sequence, chunk_cells: int = 1 << 20) -> np.ndarray:
@@ -166,8 +180,8 @@ def distance_matrix(a: Sequence, b: Sequence | None = None, kind: str = "l1", *,
                 continue
         sel = slice(None) if keep.all() else keep  # no copy of a chunk every cell of which counts
         c = None if cos is None else cos[idx[sel]]
-        xa = np.stack([transform(v[:, sel], c).reshape(-1) for v in raw_a])
-        xb = xa if b_is_a else np.stack([transform(v[:, sel], c).reshape(-1) for v in raw_b])
+        xa = _stacked(raw_a, sel, c, transform)
+        xb = xa if b_is_a else _stacked(raw_b, sel, c, transform)
         l1_sums(xa, xb, total, b_is_a)
         used += int(keep.sum())
         if progress is not None:
@@ -200,14 +214,17 @@ def _kernel():
         n, k = xa.shape
         m = xb.shape[0]
         tiles = (n + 3) // 4
-        for p in numba.prange(tiles):
-            # tiles interleaved from both ends: a triangle's long and short rows alternate,
-            # so the threads' shares of the work stay even
-            t = p // 2 if p % 2 == 0 else tiles - 1 - p // 2
-            i0 = t * 4
-            full = i0 + 3 < n
-            for b0 in range(0, k, block):
-                b1 = min(b0 + block, k)
+        # Blocks outermost: every tile sweeps one block of every member while that block
+        # (members × block values) sits in the shared cache, so each value comes from memory
+        # once, not once per tile. Each sum still adds its blocks in order: same figures.
+        for b0 in range(0, k, block):
+            b1 = min(b0 + block, k)
+            for p in numba.prange(tiles):
+                # tiles interleaved from both ends: a triangle's long and short rows
+                # alternate, so the threads' shares of the work stay even
+                t = p // 2 if p % 2 == 0 else tiles - 1 - p // 2
+                i0 = t * 4
+                full = i0 + 3 < n
                 for j in range(i0 + 1 if symmetric else 0, m):
                     b = xb[j]
                     if full:
