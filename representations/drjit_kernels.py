@@ -18,6 +18,8 @@ import torch
 
 from brdfbench import merl
 from brdfbench.nbrdf.network import MAX_LOG_VALUE, Network, n_layers
+
+from .triplane_model import WARP_R_MIN
 from brdfbench.render.drjit_kernels import (FLOAT32_EPS, FLOAT32_MAX, INV_PI, Kernel, MerlTableKernel,
                                             MerlTrilinearKernel, div, expm1, fp32_values, half_vector, log1p,
                                             opaque, safe_divisor, table_kernel, to_half_frame)
@@ -239,12 +241,17 @@ class TripleplaneKernel(Kernel):
 
     def __init__(self, shape, tensors: dict[str, torch.Tensor]):
         self.shape = shape
+        self.name = "triplane_gated" if shape.latent or shape.warps else "tripleplane"
         c_h, c_d = shape.channels
         r_d, p_d = shape.d_res
+        g = max(1, shape.latent)  # channels per feature in a texel (a C × D_s matrix when gated)
         self.h_tex = mi.Float(tensors["H"].to(torch.float32).reshape(-1).numpy().copy())
-        pole = tensors["D_pole"].to(torch.float32)[None, None, :].expand(1, p_d, c_d)
-        grid = torch.cat((pole, tensors["D"].to(torch.float32)), dim=0)  # (R_d, P_d, C_d)
+        pole = tensors["D_pole"].to(torch.float32).reshape(1, 1, c_d * g).expand(1, p_d, c_d * g)
+        grid = torch.cat((pole, tensors["D"].to(torch.float32).reshape(r_d - 1, p_d, c_d * g)), dim=0)
         self.d_tex = mi.Float(grid.reshape(-1).numpy().copy())
+        self.z_s = opaque(tensors["z_s"].numpy()) if shape.latent else None
+        self.warps = {tex: (opaque(tensors[f"warp_{tex}_alpha"].numpy()), opaque(tensors[f"warp_{tex}_weight"].numpy()))
+                      for tex in ("h", "d")} if shape.warps else None
         self.layers = []
         for i in range(1, len(shape.hidden) + 2):
             w = tensors[f"W{i}"].to(torch.float32).numpy()
@@ -258,19 +265,51 @@ class TripleplaneKernel(Kernel):
         i0 = dr.minimum(dr.floor(u), float(nodes - 2))
         return mi.UInt32(i0), u - i0
 
+    def _warped(self, r, tex: str):
+        if self.warps is None:
+            return r
+        alphas, weights = self.warps[tex]
+        log_r = dr.log(dr.maximum(r, WARP_R_MIN))
+        out = 0.0
+        for a, w in zip(alphas, weights):
+            out = out + w * dr.exp(a * log_r)
+        return dr.select(r > 0, out, 0.0)
+
+    def _gated(self, values: list, channels: int) -> list:
+        if self.z_s is None:
+            return values
+        g = len(self.z_s)
+        out = []
+        for c in range(channels):
+            acc = 0.0
+            for k, z in enumerate(self.z_s):
+                acc = dr.fma(values[c * g + k], z, acc)
+            out.append(acc)
+        return out
+
     def _features(self, wi, wo) -> list:
         c_h, c_d = self.shape.channels
+        g = max(1, self.shape.latent)
         r_nodes, p = self.shape.d_res
         h = half_vector(wi, wo)
         rho_h = dr.hypot(h.x, h.y)
         d = to_half_frame(wi, h, rho_h)
         d = div(d, safe_divisor(dr.norm(d)))
+        fh = self._gated(self._radial_read(self._warped(rho_h, "h"), c_h * g), c_h)
+        fd = self._gated(self._polar_read(self._warped(dr.hypot(d.x, d.y), "d"), d, c_d * g, r_nodes, p), c_d)
+        return fh + fd
+
+    def _radial_read(self, r, c_h: int) -> list:
         out = []
-        i0, t = self._radial(rho_h, self.shape.h_res)
+        i0, t = self._radial(r, self.shape.h_res)
         for c in range(c_h):
             a = dr.gather(mi.Float, self.h_tex, i0 * c_h + c)
             b = dr.gather(mi.Float, self.h_tex, (i0 + 1) * c_h + c)
             out.append(a + (b - a) * t)
+        return out
+
+    def _polar_read(self, r, d, c_d: int, r_nodes: int, p: int) -> list:
+        out = []
         phi = dr.atan2(d.y, d.x)
         phi = phi - math.pi * dr.floor(phi / math.pi)  # φd mod π, in [0, π)
         v = phi * (p / math.pi)
@@ -279,7 +318,7 @@ class TripleplaneKernel(Kernel):
         j0 = mi.UInt32(dr.select(j >= p, j - p, j))
         j0 = dr.select(j0 >= p, j0 - p, j0)
         j1 = dr.select(j0 + 1 >= p, j0 + 1 - p, j0 + 1)
-        k0, t = self._radial(dr.hypot(d.x, d.y), r_nodes)
+        k0, t = self._radial(r, r_nodes)
         for c in range(c_d):
             def at(i, jj):
                 return dr.gather(mi.Float, self.d_tex, (i * p + jj) * c_d + c)

@@ -59,3 +59,10 @@ TRIPLEPLANE = RepresentationSpec(
     tags=frozenset({"isotropic", "reciprocal", "fittable", "neural"}),
     check_params={"epochs": 2, "n_samples": 60_000},  # the kit's quick run: a short fit
 )
+TRIPLANE_GATED = RepresentationSpec(
+    name="triplane_gated",
+    description="Triplane-gated (Timonen et al., seed 002): tripleplane with learned radial warps and latent-gated texels",
+    target="brdfbench_representations.triplane:TriplaneGated",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "neural"}),
+    check_params={"epochs": 2, "n_samples": 60_000},  # the kit's quick run: a short fit
+)

@@ -26,14 +26,14 @@ DEFAULTS = {"h_res": 64, "d_res": (32, 32), "channels": (8, 8), "hidden": (16,)}
 MAX_TEXTURE_FLOATS = 64 * 2**20
 
 
-def _ints(name: str, value, length: int | None, minimum: int) -> tuple[int, ...]:
+def _ints(owner: str, name: str, value, length: int | None, minimum: int) -> tuple[int, ...]:
     """`value` (an integer or a list of them) as a tuple, or a ConfigError naming the key."""
     items = list(value) if isinstance(value, (list, tuple)) else [value]
     shape = f"{length} integer(s)" if length else "a non-empty list of integers"
     ok = bool(items) and (length is None or len(items) == length) and all(
         isinstance(v, int) and not isinstance(v, bool) and v >= minimum for v in items)
     if not ok:
-        raise ConfigError(f"tripleplane: {name}={value!r} must be {shape}, each ≥ {minimum}")
+        raise ConfigError(f"{owner}: {name}={value!r} must be {shape}, each ≥ {minimum}")
     return tuple(items)
 
 
@@ -51,24 +51,31 @@ class Tripleplane(Representation):
                  texture_lr: float = tf.Recipe.texture_lr, loss: str = tf.Recipe.loss, beta1: float = tf.Recipe.beta1,
                  ema: float | None = tf.Recipe.ema, precondition: float = tf.Recipe.precondition,
                  init_scale: float = tf.Recipe.init_scale, batch_materials: int = 16):
-        (h,) = _ints("h_res", h_res, 1, 2)
-        d = _ints("d_res", d_res, 2, 2)
-        c = _ints("channels", channels, 2, 1)
-        hid = _ints("hidden", hidden, None, 1)
-        self.shape = tm.Shape(h_res=h, d_res=(d[0], d[1]), channels=(c[0], c[1]), hidden=hid)
+        self._configure(dict(h_res=h_res, d_res=d_res, channels=channels, hidden=hidden, epochs=epochs,
+                             batch_size=batch_size, n_samples=n_samples, lr=lr, texture_lr=texture_lr, loss=loss,
+                             beta1=beta1, ema=ema, precondition=precondition, init_scale=init_scale,
+                             batch_materials=batch_materials))
+
+    def _configure(self, params: dict, latent: int = 0, warps: int = 0) -> None:
+        """Check `params` (the constructor's keywords) and build the shape and the recipe."""
+        name = self.plugin_name
+        (h,) = _ints(name, "h_res", params["h_res"], 1, 2)
+        d = _ints(name, "d_res", params["d_res"], 2, 2)
+        c = _ints(name, "channels", params["channels"], 2, 1)
+        hid = _ints(name, "hidden", params["hidden"], None, 1)
+        self.shape = tm.Shape(h_res=h, d_res=(d[0], d[1]), channels=(c[0], c[1]), hidden=hid, latent=latent,
+                              warps=warps)
         if self.shape.texture_floats() > MAX_TEXTURE_FLOATS:
-            raise ConfigError(f"tripleplane: h_res={h}, d_res={list(d)}, channels={list(c)} need "
+            raise ConfigError(f"{name}: h_res={h}, d_res={list(d)}, channels={list(c)} need "
                               f"{self.shape.texture_floats():,} texture floats per material, more than the "
                               f"{MAX_TEXTURE_FLOATS:,} allowed")
+        batch_materials = params["batch_materials"]
         if not isinstance(batch_materials, int) or isinstance(batch_materials, bool) or batch_materials < 1:
-            raise ConfigError(f"tripleplane: batch_materials={batch_materials!r} must be a positive integer")
-        self.recipe = tf.Recipe(epochs=epochs, batch_size=batch_size, n_samples=n_samples, lr=lr,
-                                texture_lr=texture_lr, loss=loss, beta1=beta1, ema=ema, precondition=precondition,
-                                init_scale=init_scale)
-        super().__init__(h_res=h, d_res=list(d), channels=list(c), hidden=list(hid), epochs=epochs,
-                         batch_size=batch_size, n_samples=n_samples, lr=lr, texture_lr=texture_lr, loss=loss,
-                         beta1=beta1, ema=ema, precondition=precondition, init_scale=init_scale,
-                         batch_materials=batch_materials)
+            raise ConfigError(f"{name}: batch_materials={batch_materials!r} must be a positive integer")
+        recipe_keys = ("epochs", "batch_size", "n_samples", "lr", "texture_lr", "loss", "beta1", "ema",
+                       "precondition", "init_scale")
+        self.recipe = tf.Recipe(**{k: params[k] for k in recipe_keys}, owner=name)
+        super().__init__(**{**params, "h_res": h, "d_res": list(d), "channels": list(c), "hidden": list(hid)})
         self.batch_materials = batch_materials
         self.tensors: dict[str, torch.Tensor] | None = None
         self.fit_info: dict[str, Any] = {}
@@ -111,7 +118,7 @@ class Tripleplane(Representation):
 
     def drjit_kernel(self):
         """The model in drjit operations (brdfbench.render), for this exact class only."""
-        if type(self) is not Tripleplane or self.tensors is None:
+        if type(self) not in (Tripleplane, TriplaneGated) or self.tensors is None:
             return None
         from .drjit_kernels import TripleplaneKernel
 
@@ -163,4 +170,43 @@ def _checked(tensors, shape: tm.Shape, name: str) -> dict[str, torch.Tensor]:
         if not t.dtype.is_floating_point or not torch.isfinite(t).all():
             raise ModelFileError(f"{name} model tensor {key!r} holds NaN or Inf, or is not floating point")
         out[key] = t.to(torch.float32).clone()
+    for tex in ("h", "d") if shape.warps else ():
+        alpha, weight = out[f"warp_{tex}_alpha"], out[f"warp_{tex}_weight"]
+        if (alpha < tm.WARP_ALPHA_MIN).any():
+            raise ModelFileError(f"{name} model tensor 'warp_{tex}_alpha' = {alpha.tolist()}: every exponent must "
+                                 f"be at least {tm.WARP_ALPHA_MIN}")
+        if (weight < 0).any() or abs(float(weight.sum()) - 1) > 1e-5:
+            raise ModelFileError(f"{name} model tensor 'warp_{tex}_weight' = {weight.tolist()}: must be "
+                                 "non-negative and sum to 1 (a partition of unity)")
     return out
+
+
+#: The triplane-gated defaults (seed 002's model): tripleplane's textures and decoder plus two
+#: warp components per texture and one latent (the uniform-material case of the gating).
+GATED_DEFAULTS = {"latent": 1, "warps": 2}
+
+
+class TriplaneGated(Tripleplane):
+    """Seed 002's model: tripleplane's textures storing C × D_s matrices that a spatial latent
+    z_s gates (z_h = H z_s; one learned z_s for a spatially uniform material, the path kept
+    general for spatially varying ones), each texture read at a learned radial warp
+    r' = Σ_k w_k r^{α_k} (w a softmax, α_k = 1/2 + softplus, started near the identity), so
+    that resolution gathers at the specular peak and the Fresnel rim."""
+
+    plugin_name: ClassVar[str] = "triplane_gated"
+
+    def __init__(self, h_res: int = DEFAULTS["h_res"], d_res: Sequence[int] = DEFAULTS["d_res"],
+                 channels: Sequence[int] = DEFAULTS["channels"], hidden: Sequence[int] = DEFAULTS["hidden"],
+                 latent: int = GATED_DEFAULTS["latent"], warps: int = GATED_DEFAULTS["warps"],
+                 epochs: int = tf.Recipe.epochs, batch_size: int = tf.Recipe.batch_size,
+                 n_samples: int = tf.Recipe.n_samples, lr: float = tf.Recipe.lr,
+                 texture_lr: float = tf.Recipe.texture_lr, loss: str = tf.Recipe.loss, beta1: float = tf.Recipe.beta1,
+                 ema: float | None = tf.Recipe.ema, precondition: float = tf.Recipe.precondition,
+                 init_scale: float = tf.Recipe.init_scale, batch_materials: int = 16):
+        (lat,) = _ints(self.plugin_name, "latent", latent, 1, 1)
+        (k,) = _ints(self.plugin_name, "warps", warps, 1, 1)
+        self._configure(dict(h_res=h_res, d_res=d_res, channels=channels, hidden=hidden, epochs=epochs,
+                             batch_size=batch_size, n_samples=n_samples, lr=lr, texture_lr=texture_lr, loss=loss,
+                             beta1=beta1, ema=ema, precondition=precondition, init_scale=init_scale,
+                             batch_materials=batch_materials), latent=lat, warps=k)
+        self.params = {**self.params, "latent": lat, "warps": k}

@@ -40,6 +40,7 @@ from . import triplane_model as tm
 from .nbrdf_fit import ONECYCLE_END_DIV, ONECYCLE_START_DIV, ONECYCLE_WARMUP, Samples, draw_samples
 
 LOSSES = ("mixed", "log_l1")
+TEXTURE_NAMES = ("H", "D", "D_pole")
 MIXED_LAMBDA = 0.9999
 MIXED_EPS = 1e-6
 LOSS_MAX_LOG = 40.0  # exp(2·40) stays finite in fp32 inside the squared error
@@ -60,10 +61,11 @@ class Recipe:
     ema: float | None = None  # smoothing factor of the parameter average; None: the last iterate
     precondition: float = 5.0  # A of the blur; 0 turns it off
     init_scale: float = 0.1  # std of the raw texture variables at the start
+    owner: str = "tripleplane"  # the plugin named in errors
 
     def __post_init__(self):
         def bad(key, why):
-            raise ConfigError(f"tripleplane: {key}={getattr(self, key)!r}: {why}")
+            raise ConfigError(f"{self.owner}: {key}={getattr(self, key)!r}: {why}")
 
         for key in ("epochs", "batch_size", "n_samples"):
             v = getattr(self, key)
@@ -121,12 +123,17 @@ def initial_state(shape: tm.Shape, log_mean: torch.Tensor, generator: torch.Gene
     last bias at the material's mean log value (so training starts at the right level)."""
     out = {}
     for name, s in shape.tensor_shapes().items():
-        if name in ("H", "D", "D_pole"):
+        if name in TEXTURE_NAMES:
             out[name] = torch.randn(s, generator=generator) * init_scale
         elif name.startswith("W"):
             limit = math.sqrt(6.0 / (s[0] + s[1]))
             out[name] = (torch.rand(s, generator=generator) * 2 - 1) * limit
-        else:
+        elif name == "z_s":
+            out[name] = torch.full(s, 1.0 / math.sqrt(s[0]))
+        elif name.endswith("_alpha"):  # raw: α = 1/2 + softplus(raw), started near the identity
+            alpha = torch.linspace(0.9, 1.1, s[0]) if s[0] > 1 else torch.ones(1)
+            out[name] = torch.log(torch.expm1(alpha - tm.WARP_ALPHA_MIN))
+        else:  # biases; a warp's raw weights (softmax: equal shares)
             out[name] = torch.zeros(s)
     out[f"b{len(shape.hidden) + 1}"] = log_mean.to(torch.float32).clone()
     return out
@@ -172,9 +179,15 @@ class _Stack:
                      "D": blur_weights(self.params["D"].shape[1:3], a) if a > 0 else None}
 
     def effective(self, params: dict) -> dict:
+        """The model's tensors from raw variables: textures blurred; a warp's exponents
+        α = 1/2 + softplus(raw) (bounded below as seed 002 bounds them) and its weights a
+        softmax (a partition of unity)."""
         out = dict(params)
         for name, dims in self.TEXTURES.items():
             out[name] = blur(params[name], self.blur[name], dims)
+        for tex in ("h", "d") if self.shape.warps else ():
+            out[f"warp_{tex}_alpha"] = tm.WARP_ALPHA_MIN + torch.nn.functional.softplus(params[f"warp_{tex}_alpha"])
+            out[f"warp_{tex}_weight"] = torch.softmax(params[f"warp_{tex}_weight"], dim=-1)
         return out
 
     @torch.no_grad()
@@ -187,7 +200,7 @@ class _Stack:
             m, v = self.m[name], self.v[name]
             m.mul_(b1).add_(g, alpha=1 - b1)
             v.mul_(b2).addcmul_(g, g, value=1 - b2)
-            rate = texture_lr if name in ("H", "D", "D_pole") else lr
+            rate = texture_lr if name in TEXTURE_NAMES else lr
             p.addcdiv_(m, (v / c2).sqrt_().add_(eps), value=-rate / c1)
             p.grad = None
             if self.avg is not None:

@@ -41,6 +41,8 @@ class Shape:
     d_res: tuple[int, int]  # (radial nodes, φ nodes) of the difference texture
     channels: tuple[int, int]  # feature channels (C_h, C_d)
     hidden: tuple[int, ...]  # the decoder's hidden widths
+    latent: int = 0  # D_s of the gating (texels hold C × D_s matrices times one latent z_s); 0: none
+    warps: int = 0  # components of each texture's radial warp; 0: none
 
     @property
     def layer_sizes(self) -> list[int]:
@@ -50,7 +52,13 @@ class Shape:
         """name → shape of one material's tensors."""
         c_h, c_d = self.channels
         r_d, p_d = self.d_res
-        out = {"H": (self.h_res, c_h), "D_pole": (c_d,), "D": (r_d - 1, p_d, c_d)}
+        g = (self.latent,) if self.latent else ()
+        out = {"H": (self.h_res, c_h, *g), "D_pole": (c_d, *g), "D": (r_d - 1, p_d, c_d, *g)}
+        if self.latent:
+            out["z_s"] = (self.latent,)
+        for tex in ("h", "d") if self.warps else ():
+            out[f"warp_{tex}_alpha"] = (self.warps,)
+            out[f"warp_{tex}_weight"] = (self.warps,)
         sizes = self.layer_sizes
         for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:]), start=1):
             out[f"W{i}"] = (a, b)
@@ -60,17 +68,23 @@ class Shape:
     def texture_floats(self) -> int:
         c_h, c_d = self.channels
         r_d, p_d = self.d_res
-        return self.h_res * c_h + c_d * (1 + (r_d - 1) * p_d)
+        return (self.h_res * c_h + c_d * (1 + (r_d - 1) * p_d)) * max(1, self.latent)
 
     def mlp_floats(self) -> int:
         sizes = self.layer_sizes
-        return sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:]))
+        return sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:])) + self.latent + 4 * self.warps
 
     def flops(self) -> int:
-        """Per evaluation, by brdfbench.flops' rules: coordinates, one linear and one bilinear
-        texture read, the SiLU decoder, exp and its clamp per channel."""
+        """Per evaluation, by brdfbench.flops' rules: coordinates, the radial warps (per
+        component a log-multiply-exp and a weighted add: 5, plus the log of r: 1), one linear
+        and one bilinear texture read, the gating (a C × D_s matrix times z_s, skipped for
+        D_s = 1 as seed 002 skips it for uniform materials: z_s folds into the texels), the
+        SiLU decoder, exp and its clamp per channel."""
         c_h, c_d = self.channels
-        return (COORD_FLOPS + flops.linear_read(c_h) + flops.bilinear_read(c_d)
+        g = max(1, self.latent)
+        warp = 2 * (1 + 5 * self.warps) if self.warps else 0
+        gating = flops.dense(g, c_h + c_d, bias=False) if self.latent > 1 else 0
+        return (COORD_FLOPS + warp + flops.linear_read(c_h * g) + flops.bilinear_read(c_d * g) + gating
                 + flops.mlp(self.layer_sizes, "silu") + 2 * N_OUTPUTS)
 
 
@@ -86,40 +100,63 @@ def coords_from_angles(theta_h, theta_d, phi_d):
 
 
 def _radial(r: torch.Tensor, nodes: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """Lower node index (B,) and fraction (B,) of r ∈ [0, 1] on `nodes` nodes."""
+    """Lower node index and fraction of r ∈ [0, 1] on `nodes` nodes (r: (B,) or (M, B))."""
     u = (r.clamp(0.0, 1.0) * (nodes - 1))
     i0 = torch.floor(u).clamp(max=nodes - 2)
     return i0.long(), u - i0
 
 
+def _select(grid: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    """grid (M, N, C) at index (B,) or (M, B) → (M, B, C). index_select on the flattened
+    grid: its gradient accumulates in a fixed order, so fits are deterministic on threads."""
+    m, n, c = grid.shape
+    index = index.expand(m, -1) + (torch.arange(m) * n)[:, None]
+    return grid.reshape(m * n, c).index_select(0, index.reshape(-1)).reshape(m, -1, c)
+
+
 def read_radial(tex: torch.Tensor, r: torch.Tensor) -> torch.Tensor:
-    """(M, B, C) features of a radial texture (M, R, C) at r (B,), linear between nodes."""
+    """(M, B, C) features of a radial texture (M, R, C) at r ((B,) or per material (M, B)),
+    linear between nodes."""
     i0, t = _radial(r, tex.shape[1])
-    t = t.to(tex.dtype)[None, :, None]
-    a, b = tex.index_select(1, i0), tex.index_select(1, i0 + 1)
+    t = t.to(tex.dtype)[..., None]
+    a, b = _select(tex, i0), _select(tex, i0 + 1)
     return a + (b - a) * t
 
 
 def read_polar(pole: torch.Tensor, rings: torch.Tensor, r: torch.Tensor, phi: torch.Tensor,
                period: float = D_PERIOD) -> torch.Tensor:
     """(M, B, C) features of a polar texture at (r, φ): pole (M, C) at r = 0, rings
-    (M, R − 1, P, C) at r = i/(R − 1), i ≥ 1; bilinear, circular in φ."""
+    (M, R − 1, P, C) at r = i/(R − 1), i ≥ 1; bilinear, circular in φ. r may be (B,) or
+    per material (M, B); φ is (B,)."""
     m, n_rings, p, c = rings.shape
     grid = torch.cat((pole[:, None, None, :].expand(m, 1, p, c), rings), dim=1).reshape(m, (n_rings + 1) * p, c)
     i0, t = _radial(r, n_rings + 1)
     v = torch.remainder(phi, period) * (p / period)
     j = torch.floor(v)
-    s = (v - j).to(rings.dtype)[None, :, None]
+    s = (v - j).to(rings.dtype)[..., None]
     j0 = torch.remainder(j.long(), p)
     j1 = torch.remainder(j0 + 1, p)
-    t = t.to(rings.dtype)[None, :, None]
-    def at(i, j):  # index_select: its gradient accumulates in a fixed order (deterministic on threads)
-        return grid.index_select(1, i * p + j)
-
-    a0, a1, b0, b1 = at(i0, j0), at(i0, j1), at(i0 + 1, j0), at(i0 + 1, j1)
+    t = t.to(rings.dtype)[..., None]
+    a0, a1 = _select(grid, i0 * p + j0), _select(grid, i0 * p + j1)
+    b0, b1 = _select(grid, (i0 + 1) * p + j0), _select(grid, (i0 + 1) * p + j1)
     lo = a0 + (a1 - a0) * s
     hi = b0 + (b1 - b0) * s
     return lo + (hi - lo) * t
+
+
+#: r below this reads as this inside a warp's logarithm (r^α's gradient in α is r^α·ln r:
+#: finite there); r = 0 itself warps to 0.
+WARP_R_MIN = 1e-12
+#: Seed 002 bounds every warp exponent from below by 1/2 (α = 1/2 is Dupuy and Jacob's warp).
+WARP_ALPHA_MIN = 0.5
+
+
+def warp(r: torch.Tensor, alpha: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+    """Seed 002 Eq. 7, r' = Σ_k w_k r^{α_k}, per material: r (B,), alpha and weight (M, K) → (M, B)."""
+    log_r = torch.log(r.clamp(min=WARP_R_MIN)).to(alpha.dtype)
+    powers = torch.exp(alpha[:, None, :] * log_r[None, :, None])
+    powers = torch.where((r > 0)[None, :, None], powers, torch.zeros_like(powers))  # 0^α = 0 exactly
+    return (weight[:, None, :] * powers).sum(dim=-1)
 
 
 def decode(weights: list[tuple[torch.Tensor, torch.Tensor]], x: torch.Tensor) -> torch.Tensor:
@@ -133,10 +170,23 @@ def decode(weights: list[tuple[torch.Tensor, torch.Tensor]], x: torch.Tensor) ->
 
 
 def log_value(tensors: dict[str, torch.Tensor], n_layers: int, r_h, r_d, phi) -> torch.Tensor:
-    """log f (M, B, 3) of stacked tensors (every name with a leading M axis; biases (M, 1, out))."""
-    feats = torch.cat((read_radial(tensors["H"], r_h), read_polar(tensors["D_pole"], tensors["D"], r_d, phi)), dim=-1)
+    """log f (M, B, 3) of stacked tensors (every name with a leading M axis; biases (M, 1, out)).
+    With warps, each texture is read at its warped radius; with a latent z_s, each texel's
+    C × D_s matrix is multiplied by it (the gating)."""
+    if "warp_h_alpha" in tensors:
+        r_h = warp(r_h, tensors["warp_h_alpha"], tensors["warp_h_weight"])
+        r_d = warp(r_d, tensors["warp_d_alpha"], tensors["warp_d_weight"])
+    h, pole, rings = tensors["H"], tensors["D_pole"], tensors["D"]
+    m = h.shape[0]
+    fh = read_radial(h.reshape(m, h.shape[1], -1), r_h)
+    fd = read_polar(pole.reshape(m, -1), rings.reshape(*rings.shape[:3], -1), r_d, phi)
+    if "z_s" in tensors:
+        z = tensors["z_s"]
+        g = z.shape[1]
+        fh = torch.einsum("mbcs,ms->mbc", fh.reshape(*fh.shape[:2], fh.shape[2] // g, g), z)
+        fd = torch.einsum("mbcs,ms->mbc", fd.reshape(*fd.shape[:2], fd.shape[2] // g, g), z)
     layers = [(tensors[f"W{i}"], tensors[f"b{i}"]) for i in range(1, n_layers + 1)]
-    return decode(layers, feats)
+    return decode(layers, torch.cat((fh, fd), dim=-1))
 
 
 def to_value(g: torch.Tensor) -> torch.Tensor:

@@ -24,7 +24,8 @@ from brdfbench.testing.kit import reference_material
 pytestmark = pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="llvm_ad_rgb needs libLLVM >= 19")
 
 #: Built-ins that must render through a native drjit kernel.
-NATIVE = ("merl", "pca", "lambert", "blinn_phong", "cook_torrance", "ggx", "nbrdf", "naive_mlp", "tripleplane")
+NATIVE = ("merl", "pca", "lambert", "blinn_phong", "cook_torrance", "ggx", "nbrdf", "naive_mlp", "tripleplane",
+          "triplane_gated")
 #: Cheap fitting parameters: the adapter is under test here, not the fit.
 CHEAP = {
     "blinn_phong": {"n_samples": 512, "restarts": 1},
@@ -75,7 +76,7 @@ def darker_material():
 def make_model(fitted, name: str):
     """A model of `name` fitted to synthetic material 1 (the session's shared fit; neural
     ones: random weights, the adapter is under test here, not the fit)."""
-    if name in ("nbrdf", "naive_mlp", "tripleplane"):
+    if name in ("nbrdf", "naive_mlp", "tripleplane", "triplane_gated"):
         return _random(name)
     return fitted(name, train=[reference_material(), darker_material()], **CHEAP.get(name, {}))
 
@@ -87,13 +88,16 @@ def random_tripleplane(model, seed: int):
     g = torch.Generator().manual_seed(seed)
     state = {k: torch.randn(s, generator=g) * (0.1 if k in ("H", "D", "D_pole") else 0.5)
              for k, s in model.shape.tensor_shapes().items()}
+    for tex in ("h", "d") if model.shape.warps else ():  # triplane_gated: valid warps
+        state[f"warp_{tex}_alpha"] = torch.linspace(0.6, 1.8, model.shape.warps)
+        state[f"warp_{tex}_weight"] = torch.full((model.shape.warps,), 1.0 / model.shape.warps)
     return type(model).from_state(model.params, state, {})
 
 
 @functools.lru_cache(maxsize=None)
 def _random(name: str):
     model = registry.get("representations", name).create()
-    if name == "tripleplane":
+    if name in ("tripleplane", "triplane_gated"):
         return random_tripleplane(model, seed=len(name))
     return random_mlp(model, seed=len(name))
 
@@ -285,10 +289,10 @@ def _render_kernel(mi, mb, bsdf: dict) -> tuple[str, bool]:
     return biggest["hash"], bool(biggest["cache_hit"])
 
 
-@pytest.mark.parametrize("name", ["merl", "nbrdf", "ggx", "tripleplane"])
+@pytest.mark.parametrize("name", ["merl", "nbrdf", "ggx", "tripleplane", "triplane_gated"])
 def test_second_material_reuses_the_kernel(mi, mb, name, fitted):
     first = make_model(fitted, name)
-    if name == "tripleplane":
+    if name in ("tripleplane", "triplane_gated"):
         second = random_tripleplane(type(first)(), seed=99)
     elif name == "merl":
         second = type(first)().fit(darker_material())

@@ -16,7 +16,7 @@ from brdfbench.errors import ConfigError, ModelFileError
 from brdfbench.protocol import Material
 from brdfbench_representations import triplane_fit as tf
 from brdfbench_representations import triplane_model as tm
-from brdfbench_representations.triplane import Tripleplane
+from brdfbench_representations.triplane import Tripleplane, TriplaneGated
 
 SMALL = {"h_res": 8, "d_res": [6, 10], "channels": [3, 4], "hidden": [5]}
 
@@ -73,14 +73,19 @@ def test_reads_are_bilinear_between_the_four_nodes_around(r, phi):
     assert torch.allclose(got[0, 0], want, atol=1e-9)
 
 
-def test_a_model_is_reciprocal_and_isotropic_by_construction():
-    model = _random_model()
-    wi, wo = _pairs(4000, 1)
+def _reciprocal_and_isotropic(model, seed: int, angle: float) -> torch.Tensor:
+    """Values at random pairs, checked against swapped and rotated pairs."""
+    wi, wo = _pairs(4000, seed)
     a = model.eval(wi, wo)
     assert torch.allclose(a, model.eval(wo, wi), rtol=1e-9, atol=0)
-    c, s = math.cos(1.1), math.sin(1.1)
+    c, s = math.cos(angle), math.sin(angle)
     rot = torch.tensor([[c, -s, 0], [s, c, 0], [0, 0, 1]], dtype=torch.float64)
     assert torch.allclose(a, model.eval(wi @ rot.T, wo @ rot.T), rtol=1e-8, atol=0)
+    return a
+
+
+def test_a_model_is_reciprocal_and_isotropic_by_construction():
+    a = _reciprocal_and_isotropic(_random_model(), seed=1, angle=1.1)
     assert torch.isfinite(a).all() and (a > 0).all()
 
 
@@ -105,14 +110,18 @@ def test_flops_follow_the_project_counter_and_the_default_is_equal_flop():
     assert model.nbytes == 4 * (64 * 8 + 8 * (1 + 31 * 32) + (16 * 16 + 16) + (16 * 3 + 3))
 
 
-def test_fit_does_not_depend_on_batch_mates_and_beats_a_constant(sharp_materials):
+@pytest.mark.parametrize("cls", ["Tripleplane", "TriplaneGated"])
+def test_fit_does_not_depend_on_batch_mates_and_learns(sharp_materials, cls):
+    cls = {"Tripleplane": Tripleplane, "TriplaneGated": TriplaneGated}[cls]
     params = {**SMALL, "epochs": 3, "n_samples": 40_000, "batch_size": 2048}
-    alone = Tripleplane(**params).fit(sharp_materials[0], seed=3)
-    together = Tripleplane(**params).fit_many(sharp_materials, seed=3)[0]
+    alone = cls(**params).fit(sharp_materials[0], seed=3)
+    together = cls(**params).fit_many(sharp_materials, seed=3)[0]
     for k, t in alone.tensors.items():
         assert torch.allclose(t, together.tensors[k], rtol=1e-4, atol=1e-5), k
     curve = alone.fit_info["training_curve"]
     assert len(curve) == 3 and curve[-1] < curve[0]
+    if cls is TriplaneGated:
+        assert not torch.equal(alone.tensors["warp_h_alpha"], torch.tensor([0.9, 1.1]))  # the warps trained
 
 
 def test_save_and_load_round_trip(tmp_path):
@@ -161,3 +170,62 @@ def sharp_materials():
         name, category, table = generate_material(i, seed=0)
         out.append(Material(name=name, table=table, category=category))
     return out
+
+
+# --------------------------------------------------------------------------- triplane-gated
+
+
+def _random_gated(seed: int = 0, **params) -> TriplaneGated:
+    model = TriplaneGated(**{**SMALL, "latent": 3, "warps": 2, **params})
+    g = torch.Generator().manual_seed(seed)
+    state = {k: torch.randn(s, generator=g) * 0.5 for k, s in model.shape.tensor_shapes().items()}
+    for tex in ("h", "d"):
+        state[f"warp_{tex}_alpha"] = torch.tensor([0.7, 1.6])
+        state[f"warp_{tex}_weight"] = torch.tensor([0.3, 0.7])
+    return TriplaneGated.from_state(model.params, state, {})
+
+
+def test_warps_are_a_partition_of_unity_of_powers_started_near_the_identity():
+    r = torch.linspace(0, 1, 101, dtype=torch.float64)
+    alpha, weight = torch.tensor([[0.5, 2.0]], dtype=torch.float64), torch.tensor([[0.25, 0.75]], dtype=torch.float64)
+    want = 0.25 * r.sqrt() + 0.75 * r**2
+    assert torch.allclose(tm.warp(r, alpha, weight)[0], want, atol=1e-12)
+    shape = TriplaneGated(**SMALL).shape
+    raw = tf.initial_state(shape, torch.zeros(3), torch.Generator().manual_seed(0), 0.1)
+    stack = tf._Stack(shape, [raw], tf.Recipe())
+    eff = stack.effective({k: v.detach() for k, v in stack.params.items()})
+    assert torch.allclose(eff["warp_h_weight"].sum(-1), torch.ones(1))
+    assert (eff["warp_d_alpha"] >= tm.WARP_ALPHA_MIN).all()
+    warped = tm.warp(r.float(), eff["warp_h_alpha"], eff["warp_h_weight"])[0]
+    assert (warped - r.float()).abs().max() < 0.05  # near the identity at the start
+    grad_r = torch.tensor([0.0, 1e-30, 0.5], requires_grad=True)
+    a = torch.tensor([[0.6, 1.2]], requires_grad=True)
+    tm.warp(grad_r, a, torch.tensor([[0.5, 0.5]])).sum().backward()
+    assert torch.isfinite(a.grad).all() and torch.isfinite(grad_r.grad).all()  # finite at r = 0
+
+
+def test_the_gated_model_is_reciprocal_isotropic_and_gates_by_its_latent():
+    model = _random_gated()
+    a = _reciprocal_and_isotropic(model, seed=7, angle=0.4)
+    wi, wo = _pairs(4000, 7)
+    other = dict(model.state_dict(), z_s=model.state_dict()["z_s"] * -2.0)
+    assert not torch.allclose(TriplaneGated.from_state(model.params, other, {}).eval(wi, wo), a)
+
+
+def test_gated_flops_count_the_warps_and_skip_a_one_dimensional_gating():
+    one = TriplaneGated()
+    assert one.flops_per_eval == Tripleplane().flops_per_eval + 2 * (1 + 5 * 2)
+    assert 800 <= one.flops_per_eval <= 900
+    three = TriplaneGated(latent=3)
+    assert three.flops_per_eval > one.flops_per_eval and three.nbytes > 2.9 * Tripleplane().texture_nbytes
+
+
+def test_a_loaded_warp_out_of_bounds_is_refused_naming_the_tensor():
+    model = _random_gated()
+    state = model.state_dict()
+    with pytest.raises(ModelFileError, match="'warp_h_alpha'"):
+        TriplaneGated.from_state(model.params, dict(state, warp_h_alpha=torch.tensor([0.3, 1.0])), {})
+    with pytest.raises(ModelFileError, match="'warp_d_weight'"):
+        TriplaneGated.from_state(model.params, dict(state, warp_d_weight=torch.tensor([0.9, 0.9])), {})
+    with pytest.raises(ConfigError, match="warps"):
+        TriplaneGated(warps=0)
