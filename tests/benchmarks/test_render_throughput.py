@@ -34,7 +34,8 @@ from brdfbench import mitsuba_env, registry
 from brdfbench.testing.kit import reference_material
 
 RESOLUTION, SPP = 256, 16
-CASES = ("roughconductor", "merl", "merl_trilinear", "nbrdf", "naive_mlp", "ggx", "cook_torrance", "lambert")
+CASES = ("roughconductor", "merl", "merl_trilinear", "nbrdf", "naive_mlp", "tripleplane", "triplane_gated", "ggx",
+         "cook_torrance", "lambert")
 INTEGRATORS = ("path", "direct_mis")
 ROUNDS, CYCLES = 5, 6
 
@@ -54,7 +55,8 @@ def mb():
 @pytest.fixture(scope="module")
 def bsdfs(mb) -> dict[str, dict]:
     """Mitsuba's rough conductor, and adapters of models of the reference material (the
-    MLPs with Glorot weights: their cost does not depend on the values)."""
+    MLPs with Glorot weights, the triplane models with random textures: their cost does not
+    depend on the values)."""
     from brdfbench.nbrdf import network as nw
 
     out = {"roughconductor": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2}}
@@ -64,6 +66,14 @@ def bsdfs(mb) -> dict[str, dict]:
         if name in ("nbrdf", "naive_mlp"):
             model = spec.create()
             model.weights = nw.glorot_init(model.hidden, torch.Generator().manual_seed(0))
+        elif name in ("tripleplane", "triplane_gated"):  # random textures: the cost does not depend on them
+            model = spec.create()
+            g = torch.Generator().manual_seed(0)
+            state = {k: torch.randn(s, generator=g) * 0.1 for k, s in model.shape.tensor_shapes().items()}
+            for tex in ("h", "d") if model.shape.warps else ():
+                state[f"warp_{tex}_alpha"] = torch.linspace(0.8, 1.2, model.shape.warps)
+                state[f"warp_{tex}_weight"] = torch.full((model.shape.warps,), 1.0 / model.shape.warps)
+            model = type(model).from_state(model.params, state, {})
         elif name == "merl_trilinear":
             model = spec.create(mode="trilinear").fit(reference_material())
         elif name in ("merl", "lambert"):
