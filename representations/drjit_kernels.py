@@ -18,13 +18,12 @@ import torch
 
 from brdfbench import merl
 from brdfbench.nbrdf.network import MAX_LOG_VALUE, Network, n_layers
-
-from .triplane_model import WARP_R_MIN
 from brdfbench.render.drjit_kernels import (FLOAT32_EPS, FLOAT32_MAX, INV_PI, Kernel, MerlTableKernel,
                                             MerlTrilinearKernel, div, expm1, fp32_values, half_vector, log1p,
                                             opaque, safe_divisor, table_kernel, to_half_frame)
 
 from .analytic_terms import ALPHA_MIN, COS_MIN
+from .triplane_model import WARP_R_MIN
 
 # --------------------------------------------------------------------------- tables
 
@@ -169,6 +168,15 @@ class BlinnPhongKernel(AnalyticKernel):
 # --------------------------------------------------------------------------- neural
 
 
+def opaque_layer(w: torch.Tensor, b: torch.Tensor) -> tuple[list, list]:
+    """A dense layer's kernel (in, out) and bias as opaque scalars: the kernel's columns
+    (one list of `in` weights per output) and the biases, the form `dense_layers` reads."""
+    w = w.to(torch.float32).numpy()
+    flat = opaque(w)
+    return ([[flat[r * w.shape[1] + c] for r in range(w.shape[0])] for c in range(w.shape[1])],
+            opaque(b.to(torch.float32).numpy()))
+
+
 def dense_layers(x: list, layers: list, activation) -> list:
     """Dense layers as fused multiply-adds over per-input lists: `layers` holds (columns of
     opaque weights, opaque biases) per layer, `activation` follows every layer but the last;
@@ -199,13 +207,7 @@ class MLPKernel(Kernel):
         self.name = name
         self.features = network.features
         weights = network.weights
-        self.layers = []
-        for i in range(1, n_layers(weights) + 1):
-            w = weights[f"W{i}"].to(torch.float32).numpy()
-            b = weights[f"b{i}"].to(torch.float32).numpy()
-            flat = opaque(w)
-            cols = [[flat[r * w.shape[1] + c] for r in range(w.shape[0])] for c in range(w.shape[1])]
-            self.layers.append((cols, opaque(b)))
+        self.layers = [opaque_layer(weights[f"W{i}"], weights[f"b{i}"]) for i in range(1, n_layers(weights) + 1)]
         self.scale = opaque(network.output_scale.numpy())
 
     def inputs(self, wi, wo) -> list:
@@ -252,12 +254,7 @@ class TripleplaneKernel(Kernel):
         self.z_s = opaque(tensors["z_s"].numpy()) if shape.latent else None
         self.warps = {tex: (opaque(tensors[f"warp_{tex}_alpha"].numpy()), opaque(tensors[f"warp_{tex}_weight"].numpy()))
                       for tex in ("h", "d")} if shape.warps else None
-        self.layers = []
-        for i in range(1, len(shape.hidden) + 2):
-            w = tensors[f"W{i}"].to(torch.float32).numpy()
-            flat = opaque(w)
-            cols = [[flat[r * w.shape[1] + c] for r in range(w.shape[0])] for c in range(w.shape[1])]
-            self.layers.append((cols, opaque(tensors[f"b{i}"].numpy())))
+        self.layers = [opaque_layer(tensors[f"W{i}"], tensors[f"b{i}"]) for i in range(1, n_layers(tensors) + 1)]
 
     @staticmethod
     def _radial(r, nodes: int):
@@ -315,8 +312,7 @@ class TripleplaneKernel(Kernel):
         v = phi * (p / math.pi)
         j = dr.floor(v)
         s = v - j
-        j0 = mi.UInt32(dr.select(j >= p, j - p, j))
-        j0 = dr.select(j0 >= p, j0 - p, j0)
+        j0 = mi.UInt32(dr.select(j >= p, j - p, j))  # φ rounded up to π reads node 0
         j1 = dr.select(j0 + 1 >= p, j0 + 1 - p, j0 + 1)
         k0, t = self._radial(r, r_nodes)
         for c in range(c_d):

@@ -75,8 +75,6 @@ class NeuralBRDF(Representation):
 
     features: ClassVar[str] = "rusinkiewicz"
     plugin_name: ClassVar[str] = "nbrdf"
-    #: θh of the training pairs (nbrdf_fit.SAMPLINGS) when `sampling` is not given
-    default_sampling: ClassVar[str] = "uniform"
 
     def __init__(
         self,
@@ -89,7 +87,7 @@ class NeuralBRDF(Representation):
         output: str = Recipe.output,
         patience: int | None = Recipe.patience,
         min_improvement: float = Recipe.min_improvement,
-        sampling: str | None = None,
+        sampling: str = Recipe.sampling,
         batch_materials: int = DEFAULT_BATCH_MATERIALS,
         init: str = "random",
         raw_units: bool = False,
@@ -105,7 +103,6 @@ class NeuralBRDF(Representation):
             raise ConfigError(f"{name}: batch_materials={batch_materials!r} must be a positive integer")
         if not isinstance(init, str) or not init:
             raise ConfigError(f"{name}: init={init!r} must be 'random', 'shared' or a path to a network file")
-        sampling = self.default_sampling if sampling is None else sampling
         super().__init__(
             hidden=hidden, epochs=epochs, batch_size=batch_size, lr=lr, schedule=schedule, n_samples=n_samples,
             output=output, patience=patience, min_improvement=min_improvement, sampling=sampling,

@@ -149,16 +149,35 @@ class Outcome:
     epochs: int
 
 
-def learning_rate(recipe: Recipe, step: int, total: int) -> float:
-    if recipe.schedule == "constant":
-        return recipe.lr
+def one_cycle(peak: float, step: int, total: int) -> float:
+    """The one-cycle rate at `step` of `total`: a linear warm-up from peak / 25 over the first
+    10 %, then a cosine anneal to peak / 1e4 (the triplane fitter uses it too)."""
     warm = max(1, int(ONECYCLE_WARMUP * total))
     if step < warm:
-        start = recipe.lr / ONECYCLE_START_DIV
-        return start + (recipe.lr - start) * step / warm
+        start = peak / ONECYCLE_START_DIV
+        return start + (peak - start) * step / warm
     t = (step - warm) / max(1, total - warm)
-    end = recipe.lr / ONECYCLE_END_DIV
-    return end + (recipe.lr - end) * 0.5 * (1 + math.cos(math.pi * t))
+    end = peak / ONECYCLE_END_DIV
+    return end + (peak - end) * 0.5 * (1 + math.cos(math.pi * t))
+
+
+def learning_rate(recipe: Recipe, step: int, total: int) -> float:
+    return recipe.lr if recipe.schedule == "constant" else one_cycle(recipe.lr, step, total)
+
+
+@torch.no_grad()
+def adam_update(p: torch.Tensor, m: torch.Tensor, v: torch.Tensor, lr: float, step: int,
+                betas: tuple[float, float] = ADAM_BETAS, eps: float = ADAM_EPS) -> None:
+    """One bias-corrected Adam step of `p` from its gradient, in place (moments m, v; `step`
+    counts from 1); clears the gradient. Elementwise, so stacked materials never mix."""
+    b1, b2 = betas
+    c1, c2 = 1 - b1**step, 1 - b2**step
+    g = p.grad
+    m.mul_(b1).add_(g, alpha=1 - b1)
+    v.mul_(b2).addcmul_(g, g, value=1 - b2)
+    denom = (v / c2).sqrt_().add_(eps)
+    p.addcdiv_(m, denom, value=-lr / c1)
+    p.grad = None
 
 
 class _Stack:
@@ -190,15 +209,8 @@ class _Stack:
     @torch.no_grad()
     def adam_step(self, lr: float) -> None:
         self.t += 1
-        b1, b2 = ADAM_BETAS
-        c1, c2 = 1 - b1**self.t, 1 - b2**self.t
         for p, m, v in zip(self.params, self.m, self.v):
-            g = p.grad
-            m.mul_(b1).add_(g, alpha=1 - b1)
-            v.mul_(b2).addcmul_(g, g, value=1 - b2)
-            denom = (v / c2).sqrt_().add_(ADAM_EPS)
-            p.addcdiv_(m, denom, value=-lr / c1)
-            p.grad = None
+            adam_update(p, m, v, lr, self.t)
 
     def keep(self, rows: torch.Tensor) -> None:
         with torch.no_grad():

@@ -113,7 +113,7 @@ class Tripleplane(Representation):
         dtype = wi.dtype
         stacked = {k: (v.to(dtype)[None, None] if k.startswith("b") else v.to(dtype)[None])
                    for k, v in self.tensors.items()}
-        g = tm.log_value(stacked, len(self.shape.hidden) + 1, r_h, r_d, phi)[0]
+        g = tm.log_value(stacked, r_h, r_d, phi)[0]
         return tm.to_value(g)
 
     def drjit_kernel(self):

@@ -37,14 +37,14 @@ from brdfbench import merl
 from brdfbench.errors import ConfigError
 
 from . import triplane_model as tm
-from .nbrdf_fit import ONECYCLE_END_DIV, ONECYCLE_START_DIV, ONECYCLE_WARMUP, Samples, draw_samples
+from .nbrdf_fit import COS_MIN, Samples, adam_update, draw_samples, one_cycle
 
 LOSSES = ("mixed", "log_l1")
 TEXTURE_NAMES = ("H", "D", "D_pole")
 MIXED_LAMBDA = 0.9999
 MIXED_EPS = 1e-6
 LOSS_MAX_LOG = 40.0  # exp(2·40) stays finite in fp32 inside the squared error
-COS_MIN = 1e-7
+ADAM_BETA2, ADAM_EPS = 0.999, 1e-15  # seed 002's
 
 
 @dataclass(frozen=True)
@@ -139,16 +139,6 @@ def initial_state(shape: tm.Shape, log_mean: torch.Tensor, generator: torch.Gene
     return out
 
 
-def _lr(base: float, step: int, total: int) -> float:
-    warm = max(1, int(ONECYCLE_WARMUP * total))
-    if step < warm:
-        start = base / ONECYCLE_START_DIV
-        return start + (base - start) * step / warm
-    t = (step - warm) / max(1, total - warm)
-    end = base / ONECYCLE_END_DIV
-    return end + (base - end) * 0.5 * (1 + math.cos(math.pi * t))
-
-
 @dataclass
 class Outcome:
     tensors: dict[str, torch.Tensor]  # the fitted model's tensors (textures blurred), one material
@@ -163,9 +153,8 @@ class _Stack:
 
     def __init__(self, shape: tm.Shape, inits: Sequence[dict], recipe: Recipe):
         self.shape, self.recipe = shape, recipe
-        self.names = list(shape.tensor_shapes())
         self.params = {}
-        for name in self.names:
+        for name in shape.tensor_shapes():
             t = torch.stack([w[name].to(torch.float32) for w in inits])
             if name.startswith("b"):
                 t = t[:, None, :]
@@ -193,16 +182,9 @@ class _Stack:
     @torch.no_grad()
     def adam_step(self, lr: float, texture_lr: float) -> None:
         self.t += 1
-        b1, b2, eps = self.recipe.beta1, 0.999, 1e-15
-        c1, c2 = 1 - b1**self.t, 1 - b2**self.t
         for name, p in self.params.items():
-            g = p.grad
-            m, v = self.m[name], self.v[name]
-            m.mul_(b1).add_(g, alpha=1 - b1)
-            v.mul_(b2).addcmul_(g, g, value=1 - b2)
             rate = texture_lr if name in TEXTURE_NAMES else lr
-            p.addcdiv_(m, (v / c2).sqrt_().add_(eps), value=-rate / c1)
-            p.grad = None
+            adam_update(p, self.m[name], self.v[name], rate, self.t, (self.recipe.beta1, ADAM_BETA2), ADAM_EPS)
             if self.avg is not None:
                 self.avg[name].lerp_(p, self.recipe.ema)
 
@@ -248,7 +230,6 @@ def fit_batched(tables: Sequence[merl.MerlTable], init_seeds: Sequence[int], sha
     total = recipe.epochs * steps
     order = torch.Generator().manual_seed(sample_seed + 1)
     curves: list[list[float]] = [[] for _ in tables]
-    n_layers = len(shape.hidden) + 1
     step = 0
     bar = tqdm(range(recipe.epochs), desc=progress if isinstance(progress, str) else "tripleplane fit", unit="epoch",
                disable=not progress, leave=False, dynamic_ncols=True)
@@ -258,12 +239,12 @@ def fit_batched(tables: Sequence[merl.MerlTable], init_seeds: Sequence[int], sha
         for start in range(0, n, recipe.batch_size):
             idx = perm[start:start + recipe.batch_size]
             eff = stack.effective(stack.params)
-            g = tm.log_value(eff, n_layers, r_h[idx], r_d[idx], phi[idx])
+            g = tm.log_value(eff, r_h[idx], r_d[idx], phi[idx])
             m = mask[:, idx]
             err = batch_loss(g, y[:, idx], m, cos_i[idx], recipe.loss)
             count = m.sum(dim=1)
             (err.sum(dim=1) / count.clamp(min=1)).sum().backward()
-            stack.adam_step(_lr(recipe.lr, step, total), _lr(recipe.texture_lr, step, total))
+            stack.adam_step(one_cycle(recipe.lr, step, total), one_cycle(recipe.texture_lr, step, total))
             step += 1
             sums += err.detach().sum(dim=1)
             counts += count

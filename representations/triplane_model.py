@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import torch
 
 from brdfbench import coords, flops
-from brdfbench.nbrdf.network import MAX_LOG_VALUE
+from brdfbench.nbrdf.network import MAX_LOG_VALUE, n_layers
 
 N_OUTPUTS = 3
 D_PERIOD = math.pi  # φd is read modulo π
@@ -91,12 +91,7 @@ class Shape:
 def texture_coords(wi: torch.Tensor, wo: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(r_h, r_d, φd mod π) of direction pairs, in their dtype."""
     hd = coords.to_half_diff(wi, wo)
-    return coords_from_angles(hd.theta_h, hd.theta_d, hd.phi_d)
-
-
-def coords_from_angles(theta_h, theta_d, phi_d):
-    """(r_h, r_d, φ) from Rusinkiewicz angles."""
-    return torch.sin(theta_h), torch.sin(theta_d), torch.remainder(phi_d, D_PERIOD)
+    return torch.sin(hd.theta_h), torch.sin(hd.theta_d), torch.remainder(hd.phi_d, D_PERIOD)
 
 
 def _radial(r: torch.Tensor, nodes: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -169,7 +164,7 @@ def decode(weights: list[tuple[torch.Tensor, torch.Tensor]], x: torch.Tensor) ->
     return h
 
 
-def log_value(tensors: dict[str, torch.Tensor], n_layers: int, r_h, r_d, phi) -> torch.Tensor:
+def log_value(tensors: dict[str, torch.Tensor], r_h, r_d, phi) -> torch.Tensor:
     """log f (M, B, 3) of stacked tensors (every name with a leading M axis; biases (M, 1, out)).
     With warps, each texture is read at its warped radius; with a latent z_s, each texel's
     C × D_s matrix is multiplied by it (the gating)."""
@@ -185,7 +180,7 @@ def log_value(tensors: dict[str, torch.Tensor], n_layers: int, r_h, r_d, phi) ->
         g = z.shape[1]
         fh = torch.einsum("mbcs,ms->mbc", fh.reshape(*fh.shape[:2], fh.shape[2] // g, g), z)
         fd = torch.einsum("mbcs,ms->mbc", fd.reshape(*fd.shape[:2], fd.shape[2] // g, g), z)
-    layers = [(tensors[f"W{i}"], tensors[f"b{i}"]) for i in range(1, n_layers + 1)]
+    layers = [(tensors[f"W{i}"], tensors[f"b{i}"]) for i in range(1, n_layers(tensors) + 1)]
     return decode(layers, torch.cat((fh, fd), dim=-1))
 
 
