@@ -35,16 +35,14 @@ from __future__ import annotations
 
 import math
 import os
-import weakref
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
 
-from . import coords
+from . import coords, reused
 from .atomic import replacing
 from .errors import DataError
 
@@ -370,9 +368,8 @@ def phi_diff_index(phi_d: torch.Tensor) -> torch.Tensor:
 
 
 def cell_indices(wi: torch.Tensor, wo: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """The reader's (θh, θd, φd) cell indices of each pair (int64); see `reuse_directions`."""
-    known = _reused(wi, wo, "cells")
-    return known if known is not None else direction_data(wi, wo, "cells")
+    """The reader's (θh, θd, φd) cell indices of each pair (int64); see `brdfbench.reused`."""
+    return reused.derived(direction_data, wi, wo, "cells")
 
 
 def angle_cell_indices(theta_i, phi_i, theta_o, phi_o) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -416,8 +413,7 @@ def gather_cells(values: np.ndarray, flat: torch.Tensor) -> torch.Tensor:
 
 def lookup_nearest(values: np.ndarray, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
     """Nearest-cell values (N, 3), float64, exactly as the reference reader returns them."""
-    known = _reused(wi, wo, "flat")
-    return gather_cells(values, known[0] if known is not None else flat_index(*cell_indices(wi, wo)))
+    return gather_cells(values, reused.derived(direction_data, wi, wo, "flat")[0])
 
 
 def lookup_nearest_angles(values: np.ndarray, theta_i, phi_i, theta_o, phi_o) -> torch.Tensor:
@@ -437,8 +433,7 @@ def continuous_indices(theta_h, theta_d, phi_d):
 
 def lookup_trilinear(values: np.ndarray, wi: torch.Tensor, wo: torch.Tensor) -> torch.Tensor:
     """Trilinear interpolation between cell centres; φd wraps (period π); invalid cells get zero weight."""
-    known = _reused(wi, wo, "continuous")
-    th, td, pd = known if known is not None else direction_data(wi, wo, "continuous")
+    th, td, pd = reused.derived(direction_data, wi, wo, "continuous")
     table = torch.from_numpy(np.ascontiguousarray(values)).reshape(3, N_CELLS)
     valid = (table >= 0).all(dim=0).double()  # scales are positive: same sign as raw
 
@@ -467,56 +462,6 @@ def lookup_trilinear(values: np.ndarray, wi: torch.Tensor, wo: torch.Tensor) -> 
                 wsum += w
     out = acc / torch.where(wsum > 0, wsum, torch.ones_like(wsum))[:, None]
     return torch.where((wsum > 0)[:, None], out, torch.full_like(out, -1.0))
-
-
-# --------------------------------------------------------------------------- reused directions
-#
-# A harness evaluates every material at the same directions. It registers the tensors it
-# passes to models, with a function giving their direction data (computed once per process
-# on all of its directions), so table lookups on exactly those tensors skip the angle and
-# index computation. An entry holds weak references and is matched by identity (`is`), so a
-# freed tensor whose id is reused never matches; it is dropped when a tensor changes in place.
-
-MAX_REUSED = 64  # registered pairs kept; the oldest goes first
-
-
-@dataclass(eq=False)
-class _Reused:
-    wi: weakref.ref
-    wo: weakref.ref
-    versions: tuple[int, int]
-    provide: Callable[[str], tuple[torch.Tensor, ...]]
-
-
-_REUSED: dict[int, _Reused] = {}
-
-
-def reuse_directions(wi: torch.Tensor, wo: torch.Tensor,
-                     provide: Callable[[str], tuple[torch.Tensor, ...]]) -> None:
-    """Register (wi, wo): lookups on these very tensors, while unmodified, take their
-    direction data from `provide(kind)`, which must return `direction_data(wi, wo, kind)`."""
-    key = id(wi)
-    forget = lambda ref, key=key: _forget(key, ref)  # noqa: E731
-    _REUSED.pop(key, None)
-    _REUSED[key] = _Reused(weakref.ref(wi, forget), weakref.ref(wo, forget), (wi._version, wo._version), provide)
-    while len(_REUSED) > MAX_REUSED:
-        _REUSED.pop(next(iter(_REUSED)))
-
-
-def _forget(key: int, ref: weakref.ref) -> None:
-    entry = _REUSED.get(key)
-    if entry is not None and (ref is entry.wi or ref is entry.wo):
-        del _REUSED[key]
-
-
-def _reused(wi: torch.Tensor, wo: torch.Tensor, kind: str):
-    entry = _REUSED.get(id(wi))
-    if entry is None or entry.wi() is not wi or entry.wo() is not wo:
-        return None
-    if (wi._version, wo._version) != entry.versions:
-        del _REUSED[id(wi)]
-        return None
-    return entry.provide(kind)
 
 
 # --------------------------------------------------------------------------- the grid

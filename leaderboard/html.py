@@ -16,7 +16,7 @@ import pandas as pd
 
 from . import cell_figures, generation_render, pareto, published, svg_plot, view
 from . import plots as plots_module
-from .markdown import fmt
+from .markdown import fmt, sharpness_caption
 from .view import Cell, ConvergenceSection, Metric, TableSection
 
 CONTENDED = "†"
@@ -144,6 +144,7 @@ def table_section(s: TableSection, sid: str, results_dir: Path | None = None) ->
         out += _images(s, sid, results_dir)
     out += _per_metric(s, sid)
     out += _categories(s, sid)
+    out += _sharpness(s, sid)
     return out + _failures(s.failures)
 
 
@@ -248,6 +249,24 @@ def _categories(s: TableSection, sid: str) -> list[str]:
         body.append(f"<tr>{''.join(cells)}</tr>")
     return [f"<h3>Mean <code>{_e(s.primary.name)}</code> per category</h3>",
             f'<div class="scroll"><table class="sortable" id="{sid}-categories"><thead><tr>{"".join(head)}</tr>'
+            f"</thead><tbody>{''.join(body)}</tbody></table></div>"]
+
+
+def _sharpness(s: TableSection, sid: str) -> list[str]:
+    split = s.sharpness
+    if split is None:
+        return []
+    head = [_th("representation", cls="label")]
+    for m in split.metrics:
+        head += [_th(f"{m.name} {m.arrow}, sharpest ({len(split.sharpest)})"), _th(f"{m.name} {m.arrow}, rest ({split.rest})")]
+    body = []
+    for row in s.rows:
+        cells = [f'<td class="label"><code>{_e(row.label)}</code></td>']
+        for m in split.metrics:
+            cells += [_cell(split.cells.get((row.config_hash, m.name, part)), m) for part in (True, False)]
+        body.append(f"<tr>{''.join(cells)}</tr>")
+    return ["<h3>The sharpest tenth of the targets</h3>", f'<p class="note">{_e(sharpness_caption(split))}</p>',
+            f'<div class="scroll"><table class="sortable" id="{sid}-sharpest"><thead><tr>{"".join(head)}</tr>'
             f"</thead><tbody>{''.join(body)}</tbody></table></div>"]
 
 

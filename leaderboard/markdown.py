@@ -106,7 +106,25 @@ def table_section(s: TableSection) -> list[str]:
         lines += _table(header, [[f"`{row.label}`", *[cell_text(c.cells.get(row.config_hash)) for c in s.categories]]
                                  for row in s.rows])
         lines.append("")
+    if s.sharpness is not None:
+        split = s.sharpness
+        header = ["representation"]
+        for m in split.metrics:
+            header += [f"{m.name} {m.arrow} sharpest ({len(split.sharpest)})", f"{m.name} {m.arrow} rest ({split.rest})"]
+        lines += ["### The sharpest tenth of the targets", "", sharpness_caption(split), ""]
+        lines += _table(header, [[f"`{row.label}`", *[cell_text(split.cells.get((row.config_hash, m.name, part)))
+                                                      for m in split.metrics for part in (True, False)]]
+                                 for row in s.rows])
+        lines.append("")
     return lines + _failures(s.failures)
+
+
+def sharpness_caption(split: view.Split) -> str:
+    named = ", ".join(f"{m} ({split.widths[m]:.3g} rad)" for m in split.sharpest)
+    return (f"Means over the {len(split.sharpest)} materials whose target has the narrowest specular lobe "
+            f"and over the other {split.rest}. Width: the lobe half-width of seed 003 (C.3), the θh at which "
+            f"max over channels of f(θh, θd = 0, φd = 0) first halves, on the target's table. "
+            f"The sharpest: {named}.")
 
 
 def convergence_section(s: ConvergenceSection, plots: Collection[str] = ()) -> list[str]:

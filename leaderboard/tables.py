@@ -30,6 +30,9 @@ COST_METRICS = {
     "peak_rss_eval": "max",
     "peak_rss_train": "max",
 }
+#: Properties of a cell's target, not figures of its model: never columns; the report groups
+#: materials by them (the sharpest tenth by `target_lobe_half_width`, rad).
+TARGET_PROPERTIES = ("target_lobe_half_width",)
 #: Cost figures that depend on the machine's load (timings), flagged when measured under contention.
 TIMED = ("fit_time", "train_time", "evals_per_s", "render_time", "render_samples_per_s")
 
@@ -161,7 +164,7 @@ def dataset_caveat(name: str) -> str:
 
 def accuracy_metrics(summary: pd.DataFrame) -> list[str]:
     """The non-cost metrics present: ranked ones by rank, then the others by name."""
-    present = set(summary["metric"]) - set(COST_METRICS)
+    present = set(summary["metric"]) - set(COST_METRICS) - set(TARGET_PROPERTIES)
     ranks = {m: metric_rank(m) for m in present}
     return sorted(present, key=lambda m: (ranks[m] is None, ranks[m] or 0, m))
 

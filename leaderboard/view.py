@@ -122,6 +122,19 @@ class Category:
 
 
 @dataclass(frozen=True)
+class Split:
+    """A table section's materials split by the width of their target's specular lobe: the
+    sharpest tenth (at least one) against the rest, with each configuration's mean of
+    `metrics` over each part. Seed 002 claims the learned warps help most on sharp highlights."""
+
+    sharpest: tuple[str, ...]  # by ascending half-width
+    widths: dict[str, float]  # material → lobe half-width (rad) of the sharpest
+    rest: int
+    metrics: list[Metric]
+    cells: dict[tuple[str, str, bool], Cell]  # (config hash, metric, sharpest?) → cell
+
+
+@dataclass(frozen=True)
 class Failure:
     label: str
     material: str
@@ -145,6 +158,7 @@ class TableSection:
     categories: list[Category]
     failures: list[Failure]
     material_categories: dict[str, str] = field(default_factory=dict)
+    sharpness: Split | None = None
     kind: str = field(default="table", init=False)
 
     @property
@@ -267,9 +281,11 @@ def _failures(df: pd.DataFrame) -> list[Failure]:
     return [Failure(f.representation, f.material, str(f.message)) for f in tables.failures(df).itertuples()]
 
 
-def table_section(key: tuple[str, str, str, str], df: pd.DataFrame) -> TableSection:
-    """One table section from its rows (labels already unique within it)."""
+def table_section(key: tuple[str, str, str, str], df: pd.DataFrame, widths: dict[str, float] | None = None) -> TableSection:
+    """One table section from its rows (labels already unique within it); `widths` (material →
+    target lobe half-width, rad) splits off the sharpest tenth where every material has one."""
     dataset, fingerprint, scene, harness = key
+    df = df[~df.metric.isin(tables.TARGET_PROPERTIES)]
     materials = tuple(sorted(df["material"].unique()))
     accuracy, costs = _metrics(df)
     ok = df[(df.status == "ok") & (df.spp == 0)]
@@ -304,7 +320,41 @@ def table_section(key: tuple[str, str, str, str], df: pd.DataFrame) -> TableSect
     if "category" in df.columns:
         cats = {str(m): str(c) for m, c in df.drop_duplicates("material")[["material", "category"]].itertuples(index=False)}
     return TableSection(dataset, fingerprint, scene, harness, materials, tables.dataset_caveat(dataset), primary,
-                        accuracy, costs, rows, _categories(ok, primary, rows), _failures(df), cats)
+                        accuracy, costs, rows, _categories(ok, primary, rows), _failures(df), cats,
+                        _sharpness(ok, accuracy, rows, materials, widths or {}))
+
+
+#: Accuracy metrics the sharpest-decile split shows, where present (else the ranking one).
+SPLIT_METRICS = ("l1_log_cos", "hdr_rmse", "ssim_ldr", "flip_ldr")
+#: The split needs this many materials: below it the "tenth" is one material.
+SPLIT_MIN_MATERIALS = 10
+
+
+def lobe_widths(df: pd.DataFrame) -> dict[str, dict[str, float]]:
+    """Dataset fingerprint → material → its target's lobe half-width (rad), from any cell."""
+    got = df[(df.metric == "target_lobe_half_width") & (df.status == "ok")].dropna(subset=["value"])
+    out: dict[str, dict[str, float]] = {}
+    for (fingerprint, material), value in got.groupby(["dataset_fingerprint", "material"])["value"].first().items():
+        out.setdefault(str(fingerprint), {})[str(material)] = float(value)
+    return out
+
+
+def _sharpness(ok: pd.DataFrame, accuracy: list[Metric], rows: list[Row], materials: tuple[str, ...],
+               widths: dict[str, float]) -> Split | None:
+    if len(materials) < SPLIT_MIN_MATERIALS or not accuracy or any(m not in widths for m in materials):
+        return None
+    ordered = sorted(materials, key=lambda m: (widths[m], m))
+    sharpest = tuple(ordered[:len(ordered) // 10])
+    shown_metrics = [m for m in accuracy if m.name in SPLIT_METRICS] or accuracy[:1]
+    cells = {}
+    for metric in shown_metrics:
+        got = ok[ok.metric == metric.name].drop_duplicates(["config_hash", "material"], keep="last")
+        for row in rows:
+            mine = got[got.config_hash == row.config_hash]
+            for part, members in ((True, set(sharpest)), (False, set(materials) - set(sharpest))):
+                values = mine[mine.material.isin(members)]["value"].to_numpy(dtype=float)
+                cells[(row.config_hash, metric.name, part)] = _cell(values, metric, len(members), False)
+    return Split(sharpest, {m: widths[m] for m in sharpest}, len(materials) - len(sharpest), shown_metrics, cells)
 
 
 def _categories(ok: pd.DataFrame, primary: Metric | None, rows: list[Row]) -> list[Category]:
@@ -360,12 +410,13 @@ def build(df: pd.DataFrame, source: str) -> Report:
     from .generation_view import generation_section
 
     sections: list = []
+    widths = lobe_widths(df)
     for (name, fingerprint, scene, harness, sampler), group in tables.sections(df):
         if (group["scope"] == "set").all():
             sections.append(generation_section((name, fingerprint, scene, harness), group))
         elif harness == "convergence":
             sections.append(convergence_section((name, fingerprint, scene, harness, sampler), group))
         else:
-            sections.append(table_section((name, fingerprint, scene, harness), group))
+            sections.append(table_section((name, fingerprint, scene, harness), group, widths.get(str(fingerprint))))
     return Report(source, generated, sorted(set(map(str, df.package_version))),
                   sorted({str(s)[:10] for s in df.git_sha}), sections, False)

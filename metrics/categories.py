@@ -41,6 +41,7 @@ import numpy as np
 import torch
 
 from brdfbench import coords, merl
+from brdfbench.harness.lobes import lobe_half_width, theta_h_centres
 from brdfbench.merl import MerlTable
 from brdfbench.protocol import Material, Representation
 
@@ -241,12 +242,6 @@ def _label(index: int | None) -> str:
     return "member" if index is None else f"member {index}"
 
 
-def _theta_h_centres() -> np.ndarray:
-    """θh of the 90 cell centres (square-root warped axis)."""
-    i = (np.arange(merl.RES_THETA_H) + 0.5) / merl.RES_THETA_H
-    return i * i * (math.pi / 2)
-
-
 @lru_cache(maxsize=1)
 def _counted_grid_cells() -> torch.Tensor:
     """Flat indices of the grid cells whose two centre directions are above the horizon."""
@@ -286,7 +281,7 @@ def _representation_stats(rep: Representation, acc: _Accumulator, label: str) ->
             idx = cells[start:start + CHUNK]
             v = _eval(rep, wi[idx], wo[idx], label)
             acc.update(v[~np.isnan(v).any(axis=1)])
-        theta_h = torch.from_numpy(_theta_h_centres())
+        theta_h = torch.from_numpy(theta_h_centres())
         td = torch.full_like(theta_h, (0.5 / merl.RES_THETA_D) * (math.pi / 2))
         pd = torch.full_like(theta_h, (0.5 / merl.RES_PHI_D) * math.pi)
         row_wi, row_wo = coords.from_half_diff(theta_h, torch.zeros_like(theta_h), td, pd)
@@ -313,38 +308,9 @@ def statistics(member, f_diffuse: float = F_DIFFUSE, *, index: int | None = None
     return MaterialStats(
         max=tuple(float(x) for x in acc.max), mean=tuple(float(x) for x in acc.sum / acc.n), n_cells=acc.n,
         f_diffuse=f_diffuse, n_exceeding=acc.n_exceeding, min_norm=acc.min_norm,
-        specular_spread=acc.spread, half_width=lobe_half_width(_theta_h_centres(), norm),
+        specular_spread=acc.spread, half_width=lobe_half_width(theta_h_centres(), norm),
         lobe_peak=float(valid_row[0]) if valid_row.size else math.nan,
     )
-
-
-def lobe_half_width(theta_h, values) -> float:
-    """w: the θh at which f(θh, θd = 0, φd = 0) first drops to half of its peak f(0, 0, 0).
-
-    `values` (one per ascending θh sample, NaN = invalid, skipped) are ‖f‖∞, the largest
-    channel: the same norm as the other rules, and free of channel scales (luminance would
-    weigh a coloured lobe by its colour). The peak is the first valid sample (the first
-    MERL θh centre is 5e-5 rad). w is interpolated linearly in θh between the last sample
-    above half and the first at or below it. The first crossing, as seed 003 (C.3) words
-    it, not seed 000's "and remains smaller thereafter": f rises again at grazing
-    backscatter (θh → 90° with θi = θo) in measured and physically based data alike (the
-    synthetic gold climbs back above half its peak at θh = 89°), which would make every
-    such lobe infinitely wide. inf when f never drops to half (a flat, diffuse row); NaN
-    when no valid sample or the peak is not positive.
-    """
-    theta_h = np.asarray(theta_h, dtype=np.float64)
-    values = np.asarray(values, dtype=np.float64)
-    ok = ~np.isnan(values)
-    theta_h, values = theta_h[ok], values[ok]
-    if values.size == 0 or not values[0] > 0:
-        return math.nan
-    half = values[0] / 2
-    below = np.flatnonzero(values <= half)
-    if below.size == 0:
-        return math.inf
-    j = int(below[0])  # >= 1: the peak itself is above half
-    t = (values[j - 1] - half) / (values[j - 1] - values[j])
-    return float(theta_h[j - 1] + t * (theta_h[j] - theta_h[j - 1]))
 
 
 # --------------------------------------------------------------------------- rules

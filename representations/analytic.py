@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 
 import torch
 
+from brdfbench import reused
 from brdfbench.errors import ConfigError
 from brdfbench.protocol import Material, Representation
 
@@ -118,7 +119,7 @@ class AnalyticBRDF(Representation):
         dtype = wi.dtype
         c = {k: v.to(dtype) for k, v in self.coeffs.items()}
         shape = {k: v[0] for k, v in c.items() if k not in ("kd", "ks")}
-        out = self.combine(c["kd"], c["ks"], self.lobe(geometry(wi, wo), shape))
+        out = self.combine(c["kd"], c["ks"], self.lobe(reused.derived(geometry, wi, wo), shape))
         return out.clamp(0.0, torch.finfo(dtype).max)
 
     def fit(self, target: Material, *, seed: int = 0) -> "AnalyticBRDF":

@@ -26,6 +26,7 @@ from typing import Any, ClassVar, Sequence
 
 import torch
 
+from brdfbench import reused
 from brdfbench.errors import ConfigError, ModelFileError
 from brdfbench.nbrdf import network as net
 from brdfbench.nbrdf.formats import read_network
@@ -75,6 +76,9 @@ class NeuralBRDF(Representation):
 
     features: ClassVar[str] = "rusinkiewicz"
     plugin_name: ClassVar[str] = "nbrdf"
+    #: `l2_warmup` when a config leaves it out (null): the fraction of the schedule descending
+    #: the squared log error before the L1 loss (see NaiveMLP for why it needs one)
+    default_l2_warmup: ClassVar[float] = Recipe.l2_warmup
 
     def __init__(
         self,
@@ -88,11 +92,14 @@ class NeuralBRDF(Representation):
         patience: int | None = Recipe.patience,
         min_improvement: float = Recipe.min_improvement,
         sampling: str = Recipe.sampling,
+        l2_warmup: float | None = None,
         batch_materials: int = DEFAULT_BATCH_MATERIALS,
         init: str = "random",
         raw_units: bool = False,
     ):
         name = self.plugin_name
+        if l2_warmup is None:
+            l2_warmup = self.default_l2_warmup
         try:
             hidden = [int(h) for h in hidden]
         except (TypeError, ValueError):
@@ -106,7 +113,7 @@ class NeuralBRDF(Representation):
         super().__init__(
             hidden=hidden, epochs=epochs, batch_size=batch_size, lr=lr, schedule=schedule, n_samples=n_samples,
             output=output, patience=patience, min_improvement=min_improvement, sampling=sampling,
-            batch_materials=batch_materials, init=init, raw_units=bool(raw_units),
+            l2_warmup=l2_warmup, batch_materials=batch_materials, init=init, raw_units=bool(raw_units),
         )
         self.hidden = hidden
         self.raw_units = bool(raw_units)
@@ -114,7 +121,8 @@ class NeuralBRDF(Representation):
         self.init = init
         self._fit_params = dict(self.params)  # what a model fitted by this one was made with
         self.recipe = Recipe(epochs=epochs, batch_size=batch_size, lr=lr, schedule=schedule, n_samples=n_samples,
-                             output=output, patience=patience, min_improvement=min_improvement, sampling=sampling)
+                             output=output, patience=patience, min_improvement=min_improvement, sampling=sampling,
+                             l2_warmup=l2_warmup)
         self.output_scale = net.units_scale(self.raw_units)
         self.weights: dict[str, torch.Tensor] | None = None
         self.fit_info: dict[str, Any] = {}
@@ -201,7 +209,7 @@ class NeuralBRDF(Representation):
     def _eval(self, wi, wo):
         if self.weights is None:
             raise RuntimeError(f"{self.plugin_name}: evaluate after fit() or load")
-        return net.forward(self.weights, net.encode(wi, wo, self.features), self.output_scale)
+        return net.forward(self.weights, reused.derived(net.encode, wi, wo, self.features), self.output_scale)
 
     def drjit_kernel(self):
         """The network in drjit operations (brdfbench.render), for this exact class only:
@@ -253,15 +261,17 @@ class NBRDF(NeuralBRDF):
 class NaiveMLP(NeuralBRDF):
     """The same network fed (ωi, ωo) directly: neither isotropic nor reciprocal by construction.
 
-    Known weakness (issue 16, open): on sharp lobes (an L1-log-cos GGX fit to black-obsidian,
-    α 0.0064, tabulated) it can stay on the diffuse-only solution for the whole default
-    schedule, l1_log_cos equal to lambert's, and the early stop ends it there. Fed raw
-    directions it must first find the half-vector alignment; the L1 loss's gradient has the
-    same magnitude for every pair, so the 99 % of pairs off the peak, fitted to tiny errors,
-    pull as hard as the 1 % on it. Escaping is a matter of chance within the schedule:
-    `sampling=peak` or 30 epochs without early stop escaped in some runs (l1_log_cos 0.04–0.09
-    against 0.33) and not in others (another thread count, another material seed)."""
+    Trained with the NBRDF loss alone it collapses on sharp lobes (issue 16): fed raw
+    directions it must first find the half-vector alignment, and on a sharp lobe only about
+    1 % of the training pairs lie near the peak. The L1 loss's gradient has the same
+    magnitude for every pair, so the 99 % off the peak pin the model at the diffuse-only
+    (median) solution, l1_log_cos equal to lambert's, and the early stop ends it there.
+    The squared log error's gradient grows with the residual, so the peak pairs (residuals
+    of several log units) dominate it: the first 30 % of the schedule descends it
+    (`l2_warmup`), the rest the L1 loss, which ends at the same objective as `nbrdf`.
+    tests/integration/test_naive_mlp_sharp.py holds a sharp synthetic material to it."""
 
     tags = frozenset({"fittable", "neural"})
     features = "directions"
     plugin_name = "naive_mlp"
+    default_l2_warmup = 0.3

@@ -60,6 +60,7 @@ class Recipe:
     patience: int | None = 2
     min_improvement: float = 5e-3
     sampling: str = "uniform"  # θh of the training pairs: "uniform", or "peak" (θh = u²·π/2, MERL's spacing)
+    l2_warmup: float = 0.0  # the first fraction of the steps descends the squared log error instead (see fit_batched)
 
     def __post_init__(self):
         def bad(key, why):
@@ -79,6 +80,9 @@ class Recipe:
             bad("patience", "must be a positive integer, or null for no early stop")
         if self.sampling not in SAMPLINGS:
             bad("sampling", f"expected one of {', '.join(SAMPLINGS)}")
+        if (not isinstance(self.l2_warmup, (int, float)) or isinstance(self.l2_warmup, bool)
+                or not 0.0 <= self.l2_warmup <= 1.0):
+            bad("l2_warmup", "must be a fraction of the steps in [0, 1]")
 
 
 #: The published recipe of Sztrajman et al. (2021): Adam 5e-4, minibatch 512, 100 epochs,
@@ -271,6 +275,7 @@ def fit_batched(
     last_loss = torch.full((len(tables),), math.inf)
     steps_per_epoch = math.ceil(n_samples / recipe.batch_size)
     total_steps = recipe.epochs * steps_per_epoch
+    l2_steps = round(recipe.l2_warmup * total_steps)
     order = torch.Generator().manual_seed(sample_seed + 1)
     step = 0
     bar = tqdm(range(recipe.epochs), desc=progress if isinstance(progress, str) else "nbrdf fit", unit="epoch",
@@ -286,9 +291,11 @@ def fit_batched(
             z = stack.forward(x_e[sl])  # (M, B, 3)
             pred = predict_log(z, c_e[sl, None], d_e[sl, None], recipe.output)
             m = m_e[:, sl]
-            err = (pred - y_e[:, sl]).abs().mean(dim=2) * m  # (M, B)
+            diff = pred - y_e[:, sl]
+            err = diff.abs().mean(dim=2) * m  # (M, B)
             count = m.sum(dim=1)
-            per_material = err.sum(dim=1) / count.clamp(min=1)
+            descended = diff.square().mean(dim=2) * m if step < l2_steps else err
+            per_material = descended.sum(dim=1) / count.clamp(min=1)
             per_material.sum().backward()
             stack.adam_step(learning_rate(recipe, step, total_steps))
             step += 1

@@ -5,22 +5,25 @@ lookup (as the reference reader) for random pairs; invalid reference values are 
 
 Every material is scored at the same directions, so what depends on them alone lives in
 an `AccuracyGeometry`, one per process and settings, reused for every material: the
-pairs, the reference cells of the random pairs, and, for models that are MERL table
-lookups, the cell data of the pairs they are evaluated at (see `merl.reuse_directions`).
-Models still see the same subsets, chunks, dtypes and reference values as without it,
-and a table lookup gets its cells from the same per-pair arithmetic, run once over all
-pairs (tests/unit/test_accuracy_geometry.py checks the scores equal), so scores are unchanged
-bit for bit. A geometry holds about 110 MB at the default settings, besides the
+pairs, the reference cells of the random pairs, and what models derive from the pairs
+they are evaluated at (see `brdfbench.reused`: a table lookup's cells, an analytic lobe's
+geometry, an NBRDF's input encoding). Models still see the same subsets, chunks, dtypes and
+reference values as without it, and derived data comes from the same per-pair arithmetic,
+run once over all pairs (tests/unit/test_accuracy_geometry.py checks the scores equal), so
+scores are unchanged bit for bit. A geometry holds about 110 MB at the default settings
+for table lookups (more where analytic or neural models ask for their data), besides the
 process-wide caches of the grid and random directions it reads.
 """
 
 from __future__ import annotations
 
+import weakref
 from functools import cached_property, lru_cache, partial
+from typing import Any, Callable
 
 import torch
 
-from .. import merl
+from .. import merl, reused
 from ..protocol import Material, Representation
 from ..specs import MetricSpec
 from . import Measurement, directions
@@ -31,13 +34,38 @@ def _chunks(n: int, size: int):
         yield slice(start, min(n, start + size))
 
 
+def _joined(parts: list) -> Any:
+    """Chunks of a derived value (a tensor, or a tuple / named tuple of tensors) joined."""
+    first = parts[0]
+    if isinstance(first, torch.Tensor):
+        return _stored(torch.cat(parts))
+    joined = [_joined(list(p)) for p in zip(*parts)]
+    return type(first)(*joined) if hasattr(first, "_fields") else tuple(joined)
+
+
+def _stored(t: torch.Tensor) -> torch.Tensor:
+    """int64 data (cell indices) kept as int16 where it fits: a quarter of the memory."""
+    if t.dtype == torch.int64 and t.numel() and int(t.min()) >= -2**15 and int(t.max()) < 2**15:
+        return t.to(torch.int16)
+    return t
+
+
+def _rows_of(value: Any, index: torch.Tensor) -> Any:
+    """The rows at `index` of a joined value, in the types `fn` returns (int16 back to int64)."""
+    if isinstance(value, torch.Tensor):
+        part = value[index]
+        return part.long() if part.dtype == torch.int16 else part
+    rows = [_rows_of(v, index) for v in value]
+    return type(value)(*rows) if hasattr(value, "_fields") else tuple(rows)
+
+
 class _Pairs:
     """One domain's direction pairs (fp64) and, made on first use, their copies in the
-    evaluation dtype and the table-lookup data of those copies."""
+    evaluation dtype and what models derive from those copies (see `brdfbench.reused`)."""
 
     def __init__(self, wi: torch.Tensor, wo: torch.Tensor, dtype: torch.dtype, chunk: int):
         self.wi, self.wo, self.dtype, self.chunk = wi, wo, dtype, chunk
-        self._data: dict[str, tuple[torch.Tensor, ...]] = {}
+        self._data: dict[tuple, Any] = {}
 
     @cached_property
     def typed(self) -> tuple[torch.Tensor, torch.Tensor]:
@@ -47,28 +75,26 @@ class _Pairs:
     def cos(self) -> torch.Tensor:
         return self.wi[:, 2].contiguous()
 
-    def data(self, kind: str) -> tuple[torch.Tensor, ...]:
-        """`merl.direction_data` of all pairs in the evaluation dtype (cell indices as int16)."""
-        if kind not in self._data:
+    def data(self, fn: Callable[..., Any], args: tuple = ()) -> Any:
+        """fn(wi, wo, *args) of all pairs in the evaluation dtype, computed chunk by chunk."""
+        key = (fn, args)
+        if key not in self._data:
             wi, wo = self.typed
-            parts = [merl.direction_data(wi[s], wo[s], kind) for s in _chunks(wi.shape[0], self.chunk)]
-            whole = tuple(torch.cat(p) for p in zip(*parts))
-            self._data[kind] = tuple(t.to(torch.int16) for t in whole) if kind == "cells" else whole
-        return self._data[kind]
+            self._data[key] = _joined([fn(wi[s], wo[s], *args) for s in _chunks(wi.shape[0], self.chunk)])
+        return self._data[key]
 
-    def _provide(self, index: torch.Tensor, kind: str) -> tuple[torch.Tensor, ...]:
-        part = tuple(t[index] for t in self.data(kind))
-        return tuple(t.long() for t in part) if kind == "cells" else part
+    def _provide(self, index: torch.Tensor, fn: Callable[..., Any], args: tuple) -> Any:
+        return _rows_of(self.data(fn, args), index)
 
     def select(self, index: torch.Tensor):
         """(fp64 cos θi of the pairs at `index`, generator of (slice, wi, wo) chunks of them in
-        the dtype): what the model is evaluated at; each chunk is registered for table lookups."""
+        the dtype): what the model is evaluated at; each chunk is registered for `reused`."""
         wi, wo = (t.index_select(0, index) for t in self.typed)
 
         def batches():
             for s in _chunks(wi.shape[0], self.chunk):
                 a, b = wi[s], wo[s]
-                merl.reuse_directions(a, b, partial(self._provide, index[s]))
+                reused.register(a, b, partial(self._provide, index[s]))
                 yield s, a, b
 
         return self.cos.index_select(0, index), batches()
@@ -80,6 +106,7 @@ class AccuracyGeometry:
 
     def __init__(self, n_random: int = 2**20, seed: int = 0, dtype: torch.dtype = torch.float32, chunk: int = 2**18):
         self.key = (n_random, seed, dtype, chunk)
+        _built.add(self)
 
     @cached_property
     def grid(self) -> _Pairs:
@@ -94,6 +121,18 @@ class AccuracyGeometry:
     def random_cells(self) -> torch.Tensor:
         """Flat reference cells of the random pairs, computed as the table's nearest lookup does."""
         return merl.flat_index(*merl.direction_data(self.random.wi, self.random.wo, "cells"))
+
+
+def forget_derived() -> None:
+    """Drop what models derived from the shared geometries' pairs (a new job's models ask for
+    their own; memory measured in a job then holds none of another job's data)."""
+    for geometry in _built:
+        for pairs in ("grid", "random"):
+            if pairs in geometry.__dict__:
+                geometry.__dict__[pairs]._data.clear()
+
+
+_built: "weakref.WeakSet[AccuracyGeometry]" = weakref.WeakSet()
 
 
 @lru_cache(maxsize=2)

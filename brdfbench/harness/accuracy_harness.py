@@ -1,6 +1,8 @@
 """The BRDF-space harness plugin (`harness=default`, kind `accuracy`): accuracy on the MERL
-grid and random pairs, and evaluation throughput; each cell also saves its in-plane lobe
-slices beside its table's (`lobes`), for the report's polar plots."""
+grid and random pairs, and evaluation throughput; each cell also records its target's lobe
+half-width (`target_lobe_half_width`, a property of the material that the report's
+sharpest-decile table sorts by) and saves its in-plane lobe slices beside its table's
+(`lobes`), for the report's polar plots."""
 
 from __future__ import annotations
 
@@ -12,6 +14,8 @@ import torch
 from . import Harness, HarnessConfig, Measurement
 
 DEFAULT_METRICS = ("l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae")
+#: A property of the target, not a figure of the model (see brdfbench.harness.lobes.table_half_width)
+TARGET_HALF_WIDTH = "target_lobe_half_width"
 
 
 @dataclass(frozen=True)
@@ -30,7 +34,14 @@ class AccuracyHarness(Harness):
     Config = AccuracyConfig
     domains = ("merl_grid", "random_pairs")
 
+    def __init__(self, config, context):
+        super().__init__(config, context)
+        from .accuracy import forget_derived
+
+        forget_derived()  # the previous job's models' derived data (see brdfbench.reused)
+
     def measure(self, model, material, label: str) -> list[Measurement]:
+        from . import lobes
         from .accuracy import evaluate_accuracy
         from .cost import evaluation_throughput
 
@@ -38,6 +49,9 @@ class AccuracyHarness(Harness):
         dtype = getattr(torch, c.dtype)
         out = evaluate_accuracy(model, material, ctx.metric_specs, n_random=c.n_random, seed=ctx.seed, dtype=dtype)
         out.append(evaluation_throughput(model, batch=c.throughput_batch, seed=ctx.seed, dtype=dtype))
+        width = lobes.table_half_width(material.table)
+        if width is not None:
+            out.append(Measurement(TARGET_HALF_WIDTH, width, "rad", False))
         if c.lobes and ctx.config_hash:
             self._save_lobes(model, material, label, dtype)
         return out

@@ -1,7 +1,9 @@
 """In-plane lobe slices: a BRDF at fixed incident inclinations against the outgoing angle
 in the plane of incidence, as the polar plots of BRDF Explorer and seed 001 (Figure 8)
 draw them. A cell of the accuracy harness saves its model's slices beside its table's
-(nearest-cell lookup, as the reference reader), for the report to plot.
+(nearest-cell lookup, as the reference reader), for the report to plot. And the width
+of a target's specular lobe (seed 003's lobe half-width), by which the report sets the
+sharpest tenth of a dataset's materials apart.
 
 Signed outgoing angle: positive on the mirror side (φo = φi + π), negative on the side of
 the incident light (φo = φi); φi = 0.
@@ -14,10 +16,14 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
+import numpy as np
+
 from ..atomic import replacing
 
 if TYPE_CHECKING:  # torch only where slices are computed: a report reads them without it
     import torch
+
+    from ..merl import MerlTable
 
 THETA_I_DEG = (15.0, 45.0, 75.0)
 THETA_O_DEG = tuple(float(t) for t in range(-89, 90))  # 1° steps, the horizon left out
@@ -71,3 +77,57 @@ def read(path: Path) -> dict | None:
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         return None
     return doc
+
+
+# --------------------------------------------------------------------------- the target's lobe width
+
+#: MERL's θh resolution (brdfbench.merl.RES_THETA_H), here so that a report needs no torch
+RES_THETA_H = 90
+
+
+def theta_h_centres() -> np.ndarray:
+    """θh of the 90 MERL cell centres (square-root warped axis: dense at the specular peak)."""
+    i = (np.arange(RES_THETA_H) + 0.5) / RES_THETA_H
+    return i * i * (math.pi / 2)
+
+
+def lobe_half_width(theta_h, values) -> float:
+    """w: the θh at which f(θh, θd = 0, φd = 0) first drops to half of its peak f(0, 0, 0).
+
+    `values` (one per ascending θh sample, NaN = invalid, skipped) are ‖f‖∞, the largest
+    channel: the same norm as the other rules, and free of channel scales (luminance would
+    weigh a coloured lobe by its colour). The peak is the first valid sample (the first
+    MERL θh centre is 5e-5 rad). w is interpolated linearly in θh between the last sample
+    above half and the first at or below it. The first crossing, as seed 003 (C.3) words
+    it, not seed 000's "and remains smaller thereafter": f rises again at grazing
+    backscatter (θh → 90° with θi = θo) in measured and physically based data alike (the
+    synthetic gold climbs back above half its peak at θh = 89°), which would make every
+    such lobe infinitely wide. inf when f never drops to half (a flat, diffuse row); NaN
+    when no valid sample or the peak is not positive.
+    """
+    theta_h = np.asarray(theta_h, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    ok = ~np.isnan(values)
+    theta_h, values = theta_h[ok], values[ok]
+    if values.size == 0 or not values[0] > 0:
+        return math.nan
+    half = values[0] / 2
+    below = np.flatnonzero(values <= half)
+    if below.size == 0:
+        return math.inf
+    j = int(below[0])  # >= 1: the peak itself is above half
+    t = (values[j - 1] - half) / (values[j - 1] - values[j])
+    return float(theta_h[j - 1] + t * (theta_h[j] - theta_h[j - 1]))
+
+
+def table_half_width(table: "MerlTable") -> float | None:
+    """The lobe half-width (rad) of a table's θd = φd = 0 row (cell 0 of each, ‖f‖∞ over the
+    channels, invalid cells skipped): π/2 where f never drops to half (no lobe within the θh
+    range), None where the row has no valid cell or no positive peak. Stored by the accuracy
+    harness as `target_lobe_half_width`, which the report's sharpest-decile table ranks."""
+    row = np.asarray(table.values[:, :, 0, 0], dtype=np.float64).T.copy()
+    row[~np.asarray(table.valid[:, 0, 0])] = np.nan
+    width = lobe_half_width(theta_h_centres(), np.max(row, axis=1))
+    if math.isnan(width):
+        return None
+    return min(width, math.pi / 2)

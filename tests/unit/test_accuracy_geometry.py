@@ -1,13 +1,14 @@
-"""The accuracy harness's per-process geometry and merl's reused-direction memo: the cached
-path must score exactly as the straightforward one, for the first material and later ones,
-and must never serve data for other directions or settings."""
+"""The accuracy harness's per-process geometry and the reused-direction memo
+(`brdfbench.reused`): the cached path must score exactly as the straightforward one, for the
+first material and later ones, for table lookups, analytic lobes and neural encodings, and
+must never serve data for other directions or settings."""
 
 import gc
 
 import pytest
 import torch
 
-from brdfbench import merl, registry
+from brdfbench import merl, registry, reused
 from brdfbench.data.synthetic import generate_material
 from brdfbench.harness import directions
 from brdfbench.harness.accuracy import AccuracyGeometry, accuracy_geometry, evaluate_accuracy
@@ -59,12 +60,33 @@ def _cached(model, target, specs, **kw):
     return [m.value for m in evaluate_accuracy(model, target, specs, n_random=kw.pop("n_random", N_RANDOM), **kw)]
 
 
-@pytest.mark.parametrize("name", ["merl", "lambert"])
-def test_cached_scores_equal_uncached_for_first_and_later_materials(name, specs, materials):
+SMALL_NET = dict(epochs=1, n_samples=20_000, batch_materials=1)
+
+
+@pytest.mark.parametrize("name, params", [("merl", {}), ("lambert", {}), ("ggx", {}), ("cook_torrance", {}),
+                                          ("blinn_phong", {}), ("nbrdf", SMALL_NET), ("naive_mlp", SMALL_NET)])
+def test_cached_scores_equal_uncached_for_first_and_later_materials(name, params, specs, materials):
     accuracy_geometry.cache_clear()
     for target in materials:  # the first builds the geometry, the second reuses it
-        model = _fit(name, target)
+        model = _fit(name, target, **params)
         assert _cached(model, target, specs) == uncached_accuracy(model, target, specs, n_random=N_RANDOM)
+
+
+def test_derived_data_is_computed_once_per_job_and_dropped_by_the_next(specs, materials, monkeypatch):
+    from brdfbench.harness import accuracy
+    from brdfbench_representations import analytic
+
+    accuracy_geometry.cache_clear()
+    calls = []
+    real = analytic.geometry
+    monkeypatch.setattr(analytic, "geometry", lambda wi, wo: calls.append(wi.shape[0]) or real(wi, wo))
+    for target in materials:
+        _cached(_fit("ggx", target), target, specs)
+    n_pairs = merl.N_CELLS + N_RANDOM
+    assert sum(calls) == n_pairs  # every pair once, for both materials
+    accuracy.forget_derived()
+    _cached(_fit("ggx", materials[0]), materials[0], specs)
+    assert sum(calls) == 2 * n_pairs
 
 
 @pytest.mark.parametrize("params", [{"mode": "trilinear"}, {"downsample": 8}])
@@ -111,7 +133,7 @@ def test_explicit_geometry_must_match_the_settings(random_specs, materials):
         evaluate_accuracy(model, target, random_specs, n_random=2**11, seed=3, geometry=geometry)
 
 
-# --------------------------------------------------------------------------- merl's memo
+# --------------------------------------------------------------------------- the memo
 
 
 def _pairs(n=1000, seed=0):
@@ -123,9 +145,9 @@ def _recording_provider(wi, wo):
     wi, wo = wi.clone(), wo.clone()
     calls = []
 
-    def provide(kind):
-        calls.append(kind)
-        return merl.direction_data(wi, wo, kind)
+    def provide(fn, args):
+        calls.append(args[0])
+        return fn(wi, wo, *args)
 
     return provide, calls
 
@@ -133,7 +155,7 @@ def _recording_provider(wi, wo):
 def test_registered_directions_take_their_data_from_the_provider():
     wi, wo = _pairs()
     provide, calls = _recording_provider(wi, wo)
-    merl.reuse_directions(wi, wo, provide)
+    reused.register(wi, wo, provide)
     for got, want in zip(merl.cell_indices(wi, wo), merl.direction_data(wi, wo, "cells")):
         assert torch.equal(got, want)
     table = generate_material(1, seed=0)[2]
@@ -145,7 +167,7 @@ def test_registered_directions_take_their_data_from_the_provider():
 def test_equal_but_distinct_tensors_and_changed_tensors_are_recomputed():
     wi, wo = _pairs()
     provide, calls = _recording_provider(wi, wo)
-    merl.reuse_directions(wi, wo, provide)
+    reused.register(wi, wo, provide)
     merl.cell_indices(wi.clone(), wo.clone())  # same values, other objects
     merl.cell_indices(wo, wi)  # the pair swapped
     assert calls == []
@@ -159,11 +181,11 @@ def test_equal_but_distinct_tensors_and_changed_tensors_are_recomputed():
 def test_freed_tensors_leave_the_memo_and_their_ids_never_match():
     wi, wo = _pairs()
     provide, calls = _recording_provider(wi, wo)
-    merl.reuse_directions(wi, wo, provide)
+    reused.register(wi, wo, provide)
     key = id(wi)
     del wi, provide
     gc.collect()
-    assert key not in merl._REUSED
+    assert key not in reused._ENTRIES
     for _ in range(50):  # new tensors, some perhaps at the freed id
         a, b = _pairs()
         merl.cell_indices(a, b)
@@ -171,7 +193,7 @@ def test_freed_tensors_leave_the_memo_and_their_ids_never_match():
 
 
 def test_the_memo_is_bounded():
-    kept = [_pairs(10, seed) for seed in range(merl.MAX_REUSED + 10)]
+    kept = [_pairs(10, seed) for seed in range(reused.MAX_ENTRIES + 10)]
     for wi, wo in kept:
-        merl.reuse_directions(wi, wo, lambda kind: None)
-    assert len(merl._REUSED) <= merl.MAX_REUSED
+        reused.register(wi, wo, lambda fn, args: None)
+    assert len(reused._ENTRIES) <= reused.MAX_ENTRIES

@@ -10,6 +10,7 @@ import pytest
 import torch
 
 from brdfbench import merl, registry
+from brdfbench.harness import lobes
 from brdfbench.protocol import Material, Representation
 from brdfbench_metrics import categories as C
 
@@ -113,6 +114,18 @@ def test_half_width_edge_cases():
     assert C.lobe_half_width([0.0, 0.1, 0.2], [4.0, 3.0, 1.0]) == pytest.approx(0.15)
     # Invalid samples are skipped; a rise at grazing after the first crossing is ignored.
     assert C.lobe_half_width([0.0, 0.1, 0.2, 0.3, 1.5], [4.0, np.nan, 2.0, 0.5, 3.0]) == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize("sigma", [0.02, 0.1])
+def test_the_harness_records_the_width_the_rules_measure(sigma):
+    table = _table(base=(0.05, 0.05, 0.05), peak=100.0, sigma=sigma)
+    assert lobes.table_half_width(table) == C.statistics(table).half_width
+    assert lobes.RES_THETA_H == merl.RES_THETA_H
+
+
+def test_the_recorded_width_is_capped_or_absent_where_there_is_no_lobe():
+    assert lobes.table_half_width(_uniform((0.2, 0.2, 0.2))) == pytest.approx(math.pi / 2)  # never halves
+    assert lobes.table_half_width(_uniform((0.0, 0.0, 0.0))) is None  # no positive peak
 
 
 # --------------------------------------------------------------------------- thresholds

@@ -223,3 +223,40 @@ def test_lobe_svg_radius_is_decades_above_the_floor():
     (x0, y0), (x1, y1) = [tuple(map(float, p[1:].split(","))) for p in groups["q-table-0"].split()]
     assert (x0, y0) == (round(cx, 1), round(cy, 1)) and abs(x1 - cx) < 0.06 and abs(cy - y1 - lobe_svg.RADIUS) < 0.06
     assert len(groups["q-s3-0"].split()) == 3
+
+
+def _with_widths(df: pd.DataFrame, widths: dict[str, float]) -> pd.DataFrame:
+    cells = df.drop_duplicates(["config_hash", "material"])
+    extra = cells.assign(metric="target_lobe_half_width", unit="rad", higher_is_better=False,
+                         value=cells.material.map(widths))
+    return pd.concat([df, extra], ignore_index=True)
+
+
+def test_the_sharpest_tenth_is_split_off_by_lobe_width():
+    materials = [f"m{i:02d}" for i in range(20)]
+    widths = {m: 0.5 - 0.02 * i for i, m in enumerate(materials)}  # m19, m18 the sharpest
+    df = _with_widths(_frame(materials=materials), widths)
+    section = view.build(df, "s").sections[0]
+    assert "target_lobe_half_width" not in section.metrics  # a property of the target, never a column
+    split = section.sharpness
+    assert split.sharpest == ("m19", "m18") and split.rest == 18
+    assert split.widths == {"m19": pytest.approx(0.12), "m18": pytest.approx(0.14)}
+    good = next(r for r in section.rows if r.label == "good")
+    sharp, rest = (split.cells[(good.config_hash, "l1_log_cos", part)] for part in (True, False))
+    assert sharp.value == pytest.approx(0.1 * (1 + 0.1 * 18.5))
+    assert rest.value == pytest.approx(np.mean([0.1 * (1 + 0.1 * i) for i in range(18)]))
+    text = markdown.render(df, "s")
+    assert "### The sharpest tenth of the targets" in text and "m19 (0.12 rad), m18 (0.14 rad)" in text
+    assert "The sharpest tenth" in html.render(df, "s")
+
+
+@pytest.mark.parametrize("case", ["few materials", "a width missing", "no widths"])
+def test_no_split_without_a_width_for_every_one_of_ten_materials(case):
+    materials = [f"m{i:02d}" for i in range(9 if case == "few materials" else 12)]
+    widths = {m: 0.1 * (i + 1) for i, m in enumerate(materials)}
+    if case == "a width missing":
+        widths.pop("m03")
+    df = _frame(materials=materials) if case == "no widths" else _with_widths(_frame(materials=materials), widths)
+    df = df.dropna(subset=["value"])
+    section = view.build(df, "s").sections[0]
+    assert section.sharpness is None and "sharpest tenth" not in markdown.render(df, "s")
