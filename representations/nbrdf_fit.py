@@ -10,7 +10,11 @@ material's loss is normalised by its own valid-sample count, so the gradients of
 different materials never mix: a material's fit does not depend on its batch-mates
 (`fit_batched` of one material is the one-at-a-time loop, same arithmetic).
 
-Loss: mean |log(1 + f cos θi) − log(1 + f̂ cos θi)| over valid samples and channels.
+Loss: mean |log(1 + f cos θi) − log(1 + f̂ cos θi)| over valid samples and channels (L1, the
+published one); "l2" descends the mean squared difference instead, and "l1_or_l2" fits
+with each from the same start on the same samples and keeps, per material, the fit whose
+final L1 loss is lower. The epoch losses that the early stop and `Outcome.loss` read are
+always L1, so fits by either loss compare. Why the naive MLP needs it: see its class.
 With output="log" (the default) the prediction is computed from the last layer's z as
 log(1 + expm1(z) c) = logaddexp(z + log c, log(1 − c)): exact, finite for any z (no fp32
 overflow), and with a gradient everywhere — unlike the reference's relu(expm1(z)),
@@ -39,6 +43,7 @@ from brdfbench.nbrdf import network as net
 SCHEDULES = ("onecycle", "constant")
 OUTPUTS = ("log", "clamped")
 SAMPLINGS = ("uniform", "peak")
+LOSSES = ("l1", "l2", "l1_or_l2")
 ADAM_BETAS = (0.9, 0.999)
 ADAM_EPS = 1e-7  # Keras' default, as the reference recipe used
 ONECYCLE_WARMUP = 0.1  # fraction of the steps spent warming up
@@ -60,7 +65,7 @@ class Recipe:
     patience: int | None = 2
     min_improvement: float = 5e-3
     sampling: str = "uniform"  # θh of the training pairs: "uniform", or "peak" (θh = u²·π/2, MERL's spacing)
-    l2_warmup: float = 0.0  # the first fraction of the steps descends the squared log error instead (see fit_batched)
+    loss: str = "l1"  # "l1", "l2" (squared log error), or "l1_or_l2" (both fits, the lower L1 loss kept)
 
     def __post_init__(self):
         def bad(key, why):
@@ -80,9 +85,8 @@ class Recipe:
             bad("patience", "must be a positive integer, or null for no early stop")
         if self.sampling not in SAMPLINGS:
             bad("sampling", f"expected one of {', '.join(SAMPLINGS)}")
-        if (not isinstance(self.l2_warmup, (int, float)) or isinstance(self.l2_warmup, bool)
-                or not 0.0 <= self.l2_warmup <= 1.0):
-            bad("l2_warmup", "must be a fraction of the steps in [0, 1]")
+        if self.loss not in LOSSES:
+            bad("loss", f"expected one of {', '.join(LOSSES)}")
 
 
 #: The published recipe of Sztrajman et al. (2021): Adam 5e-4, minibatch 512, 100 epochs,
@@ -146,11 +150,13 @@ def predict_log(z: torch.Tensor, log_c: torch.Tensor, log_1mc: torch.Tensor, out
 
 @dataclass
 class Outcome:
-    """One material's fitted weights, its final training loss and the epochs it ran."""
+    """One material's fitted weights, its final training loss (the L1 loss, whatever loss was
+    descended), the epochs it ran and the loss it descended."""
 
     weights: dict[str, torch.Tensor]
     loss: float
     epochs: int
+    descended: str = "l1"
 
 
 def one_cycle(peak: float, step: int, total: int) -> float:
@@ -258,6 +264,11 @@ def fit_batched(
             raise ValueError("every initial weight dict must have the same layout")
     if samples is None:
         samples = draw_samples(recipe.n_samples, features, sample_seed, recipe.sampling)
+    if recipe.loss == "l1_or_l2":
+        runs = [fit_batched(tables, inits, features=features, recipe=replace(recipe, loss=loss), output_scale=output_scale,
+                            sample_seed=sample_seed, samples=samples, progress=progress, on_epoch=on_epoch)
+                for loss in ("l1", "l2")]
+        return [min(pair, key=lambda o: o.loss) for pair in zip(*runs)]  # ties: the L1 fit
     n_samples = samples.x.shape[0]
     log_targets, valid = zip(*(targets(t, samples, scale) for t in tables))
     y = torch.stack(log_targets)  # (M, S, 3)
@@ -275,7 +286,6 @@ def fit_batched(
     last_loss = torch.full((len(tables),), math.inf)
     steps_per_epoch = math.ceil(n_samples / recipe.batch_size)
     total_steps = recipe.epochs * steps_per_epoch
-    l2_steps = round(recipe.l2_warmup * total_steps)
     order = torch.Generator().manual_seed(sample_seed + 1)
     step = 0
     bar = tqdm(range(recipe.epochs), desc=progress if isinstance(progress, str) else "nbrdf fit", unit="epoch",
@@ -294,7 +304,7 @@ def fit_batched(
             diff = pred - y_e[:, sl]
             err = diff.abs().mean(dim=2) * m  # (M, B)
             count = m.sum(dim=1)
-            descended = diff.square().mean(dim=2) * m if step < l2_steps else err
+            descended = diff.square().mean(dim=2) * m if recipe.loss == "l2" else err
             per_material = descended.sum(dim=1) / count.clamp(min=1)
             per_material.sum().backward()
             stack.adam_step(learning_rate(recipe, step, total_steps))
@@ -318,7 +328,7 @@ def fit_batched(
             done = torch.zeros(len(active), dtype=torch.bool)
         for row in torch.nonzero(done).flatten().tolist():
             i = int(active[row])
-            outcomes[i] = Outcome(stack.weights(row), float(last_loss[i]), epoch + 1)
+            outcomes[i] = Outcome(stack.weights(row), float(last_loss[i]), epoch + 1, recipe.loss)
         if done.any() and not final:
             rows = torch.nonzero(~done).flatten()
             stack.keep(rows)

@@ -1,5 +1,6 @@
 """The runner in-process: failures and timeouts become rows, cells are skipped on re-run."""
 
+import math
 import time
 
 import pytest
@@ -88,6 +89,8 @@ def test_results_carry_units_direction_and_provenance(tmp_path, synthetic_cache)
     assert set(by_metric.index) >= {"l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae", "fit_time", "evals_per_s", "model_bytes"}
     assert by_metric.loc["evals_per_s", "unit"] == "evals/s" and by_metric.loc["evals_per_s", "higher_is_better"]
     assert by_metric.loc["fit_time", "unit"] == "s" and not by_metric.loc["fit_time", "higher_is_better"]
+    assert by_metric.loc["target_lobe_half_width", "unit"] == "rad"  # the target's, for the sharpest-tenth split
+    assert 0 < by_metric.loc["target_lobe_half_width", "value"] <= math.pi / 2
     assert (df.config_hash.str.len() == 16).all() and (df.package_version != "").all()
     assert (df.value > 0).all()
 
