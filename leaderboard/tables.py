@@ -32,7 +32,8 @@ COST_METRICS = {
 }
 #: Properties of a cell's target, not figures of its model: never columns; the report groups
 #: materials by them (the sharpest tenth by `target_lobe_half_width`, rad).
-TARGET_PROPERTIES = ("target_lobe_half_width",)
+TARGET_HALF_WIDTH = "target_lobe_half_width"
+TARGET_PROPERTIES = (TARGET_HALF_WIDTH,)
 #: Cost figures that depend on the machine's load (timings), flagged when measured under contention.
 TIMED = ("fit_time", "train_time", "evals_per_s", "render_time", "render_samples_per_s")
 

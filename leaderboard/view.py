@@ -332,7 +332,7 @@ SPLIT_MIN_MATERIALS = 10
 
 def lobe_widths(df: pd.DataFrame) -> dict[str, dict[str, float]]:
     """Dataset fingerprint → material → its target's lobe half-width (rad), from any cell."""
-    got = df[(df.metric == "target_lobe_half_width") & (df.status == "ok")].dropna(subset=["value"])
+    got = df[(df.metric == tables.TARGET_HALF_WIDTH) & (df.status == "ok")].dropna(subset=["value"])
     out: dict[str, dict[str, float]] = {}
     for (fingerprint, material), value in got.groupby(["dataset_fingerprint", "material"])["value"].first().items():
         out.setdefault(str(fingerprint), {})[str(material)] = float(value)

@@ -41,7 +41,7 @@ import numpy as np
 import torch
 
 from brdfbench import coords, merl
-from brdfbench.harness.lobes import lobe_half_width, theta_h_centres
+from brdfbench.harness.lobes import lobe_half_width, peak_row, theta_h_centres
 from brdfbench.merl import MerlTable
 from brdfbench.protocol import Material, Representation
 
@@ -255,9 +255,7 @@ def _table_stats(table: MerlTable, acc: _Accumulator, label: str) -> np.ndarray:
         raise ValueError(f"{label}: non-finite table value at channel {c}, cell ({i}, {j}, {k})")
     counted = (table.valid.reshape(-1) & merl.grid_above_horizon().numpy())
     acc.update(table.values.reshape(3, -1)[:, counted].T)
-    row = table.values[:, :, 0, 0].T.copy()
-    row[~table.valid[:, 0, 0]] = np.nan
-    return row
+    return peak_row(table)
 
 
 def _eval(rep: Representation, wi: torch.Tensor, wo: torch.Tensor, label: str) -> np.ndarray:

@@ -120,14 +120,19 @@ def lobe_half_width(theta_h, values) -> float:
     return float(theta_h[j - 1] + t * (theta_h[j] - theta_h[j - 1]))
 
 
+def peak_row(table: "MerlTable") -> np.ndarray:
+    """A table's θd = φd = 0 row (cell 0 of each), (90, 3) float64 in 1/sr, NaN where invalid."""
+    row = np.asarray(table.values[:, :, 0, 0], dtype=np.float64).T.copy()
+    row[~np.asarray(table.valid[:, 0, 0])] = np.nan
+    return row
+
+
 def table_half_width(table: "MerlTable") -> float | None:
     """The lobe half-width (rad) of a table's θd = φd = 0 row (cell 0 of each, ‖f‖∞ over the
     channels, invalid cells skipped): π/2 where f never drops to half (no lobe within the θh
     range), None where the row has no valid cell or no positive peak. Stored by the accuracy
     harness as `target_lobe_half_width`, which the report's sharpest-decile table ranks."""
-    row = np.asarray(table.values[:, :, 0, 0], dtype=np.float64).T.copy()
-    row[~np.asarray(table.valid[:, 0, 0])] = np.nan
-    width = lobe_half_width(theta_h_centres(), np.max(row, axis=1))
+    width = lobe_half_width(theta_h_centres(), np.max(peak_row(table), axis=1))
     if math.isnan(width):
         return None
     return min(width, math.pi / 2)
