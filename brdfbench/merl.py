@@ -75,9 +75,9 @@ class MerlTable:
     @classmethod
     def from_values(cls, values: np.ndarray, valid: np.ndarray | None = None) -> "MerlTable":
         """Table from BRDF values (3, 90, 90, 180); cells outside `valid` become INVALID_RAW."""
-        raw = np.asarray(values, dtype=np.float64) / _SCALES
+        raw = np.divide(values, _SCALES, dtype=np.float64)  # values cast to float64 first, as asarray would
         if valid is not None:
-            raw = np.where(valid[None], raw, INVALID_RAW)
+            raw[:, ~np.asarray(valid, dtype=bool)] = INVALID_RAW
         return cls(raw)
 
     @cached_property
@@ -87,7 +87,8 @@ class MerlTable:
     @cached_property
     def valid(self) -> np.ndarray:
         """(90, 90, 180) mask of cells valid in all three channels."""
-        return np.all(self.raw >= 0, axis=0)
+        r = self.raw  # (r >= 0).all(axis=0), without its strided reduction
+        return (r[0] >= 0) & (r[1] >= 0) & (r[2] >= 0)
 
     def lookup(self, wi: torch.Tensor, wo: torch.Tensor, mode: str = "nearest") -> torch.Tensor:
         """BRDF values (N, 3) float64 at direction pairs (raw × channel scales, negatives

@@ -44,6 +44,16 @@ def sha256_file(path: str | os.PathLike) -> str:
     return h.hexdigest()
 
 
+def recorded_digest(record: Path) -> str | None:
+    """The sha256 written in a `.sha256` record beside a cache file when it was made; None
+    if there is none or it is not a digest."""
+    try:
+        text = record.read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+    return text if len(text) == 64 and all(c in "0123456789abcdef" for c in text) else None
+
+
 class DigestCache:
     """sha256 digests of files, remembered in CACHE_NAME under the cache root.
 

@@ -34,21 +34,40 @@ def _grid_input() -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
     return x, idx, above.numpy().reshape(merl.SHAPE)
 
 
-def nbrdf_table(weights: dict[str, np.ndarray | torch.Tensor]) -> merl.MerlTable:
-    """The network (output in 1/sr) evaluated at the 90×90×180 MERL cell centres, as a MERL table.
+def grid_outputs(weights: dict[str, np.ndarray | torch.Tensor]) -> np.ndarray:
+    """The network's float32 outputs (1/sr) at the above-horizon MERL cell centres, (M, 3),
+    in the order of `grid_cells()`.
 
     Inputs are built in float64 from `merl.grid_directions()` (via `coords.to_half_diff`),
     then rounded to float32; the network runs in float32, the precision it was trained
-    and published in (float64 would differ by fp32 rounding only). Cells
-    whose centre directions are at or below the horizon are marked invalid (and the
-    network is not evaluated there).
+    and published in (float64 would differ by fp32 rounding only).
     """
-    x, idx, valid = _grid_input()
+    x, _, _ = _grid_input()
     weights = {k: torch.as_tensor(v) for k, v in weights.items()}
-    out = torch.zeros(merl.N_CELLS, 3, dtype=torch.float32)
+    out = torch.empty(x.shape[0], 3, dtype=torch.float32)
     with torch.no_grad():
         for start in range(0, x.shape[0], _CHUNK):
             sl = slice(start, start + _CHUNK)
-            out[idx[sl]] = forward(weights, x[sl])
+            out[sl] = forward(weights, x[sl])
+    return out.numpy()
+
+
+def grid_cells() -> int:
+    """How many MERL cells have both centre directions above the horizon (rows of `grid_outputs`)."""
+    return int(_grid_input()[1].shape[0])
+
+
+def table_from_outputs(outputs: np.ndarray) -> merl.MerlTable:
+    """The MERL table of `grid_outputs`: cells at or below the horizon are invalid."""
+    _, idx, valid = _grid_input()
+    out = torch.zeros(merl.N_CELLS, 3, dtype=torch.float32)
+    out[idx] = torch.from_numpy(outputs)
     values = out.T.reshape(3, *merl.SHAPE).numpy()
     return merl.MerlTable.from_values(values, valid)
+
+
+def nbrdf_table(weights: dict[str, np.ndarray | torch.Tensor]) -> merl.MerlTable:
+    """The network (output in 1/sr) evaluated at the 90×90×180 MERL cell centres, as a MERL
+    table (see `grid_outputs`). Cells whose centre directions are at or below the horizon
+    are marked invalid (and the network is not evaluated there)."""
+    return table_from_outputs(grid_outputs(weights))

@@ -5,7 +5,10 @@ of the repository. It is found through the environment variable BRDFBENCH_NBRDF_
 else as a `shared/data/neural-brdf` folder in the current directory, the package's
 source directory or any of their parents (the project layout keeps `shared/` beside
 the repository clone). Each material's network is evaluated at the MERL cell centres
-when it is loaded (well under a second).
+when it is first loaded; the outputs are kept in the cache folder ($BRDFBENCH_CACHE, else
+~/.cache/brdfbench: about 13 MB a network), keyed by the network's weights, so later loads
+(every job of a sweep, every fold of a training split) read them back exactly
+(`brdfbench.data.grid_cache`).
 """
 
 from __future__ import annotations
@@ -15,11 +18,14 @@ import json
 import os
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import ConfigError, DataError
 from ..protocol import Material
 from . import Dataset
 from ..nbrdf.keras_h5 import read_nbrdf_h5
-from .nbrdf_h5 import nbrdf_table
+from .grid_cache import weights_digest
+from .nbrdf_h5 import grid_cells, grid_outputs, table_from_outputs
 
 ENV_VAR = "BRDFBENCH_NBRDF_DIR"
 RELATIVE = Path("shared", "data", "neural-brdf")
@@ -102,9 +108,20 @@ def nbrdf_release_dataset(path: str | None = None, subset: str = "merl", limit: 
     digest = hashlib.sha256(json.dumps([FINGERPRINT_VERSION, subset, entries]).encode()).hexdigest()[:16]
     fingerprint = f"nbrdf_release:{subset}:{digest}"
 
+    cache = None
+
     def load(name: str) -> Material:
+        nonlocal cache
+        if cache is None:
+            import torch
+
+            from .grid_cache import ArrayCache
+
+            cache = ArrayCache("nbrdf_release", f"torch{torch.__version__}")
         h5path = files[name]
-        return Material(name, nbrdf_table(read_nbrdf_h5(h5path)), category=subset, source=str(h5path))
+        weights = read_nbrdf_h5(h5path)
+        outputs = cache.get(weights_digest(weights), lambda: grid_outputs(weights), (grid_cells(), 3), np.float32)
+        return Material(name, table_from_outputs(outputs), category=subset, source=str(h5path))
 
     dataset = Dataset("nbrdf_release", names, load, fingerprint, {n: subset for n in names})
     return dataset.subset(limit=limit) if limit is not None else dataset

@@ -42,7 +42,7 @@ from ..errors import ConfigError, DataError
 from ..merl import MerlTable
 from ..protocol import Material
 from . import Dataset
-from .content_hash import DigestCache, cache_root, sha256_file
+from .content_hash import DigestCache, cache_root, recorded_digest, sha256_file
 
 log = logging.getLogger(__name__)
 
@@ -564,15 +564,6 @@ def material_names(size: str | int = "default", seed: int = 0) -> tuple[str, ...
     return tuple(material_params(i, seed).name for i in range(_resolve_size(size)))
 
 
-def _recorded_digest(record: Path) -> str | None:
-    """The sha256 recorded when the cache file was generated; None if there is none."""
-    try:
-        text = record.read_text(encoding="ascii").strip()
-    except (OSError, UnicodeDecodeError):
-        return None
-    return text if len(text) == 64 and all(c in "0123456789abcdef" for c in text) else None
-
-
 def synthetic_dataset(size: str | int = "default", seed: int = 0, cache_dir: str | None = None) -> Dataset:
     """The embedded default dataset; each material's `.binary` file is generated on first load.
 
@@ -600,7 +591,7 @@ def synthetic_dataset(size: str | int = "default", seed: int = 0, cache_dir: str
             return None, None
         finally:
             digests.save()
-        expected = _recorded_digest(record)
+        expected = recorded_digest(record)
         if expected is not None and actual != expected:
             log.warning("%s: content differs from the generated file (sha256 %s..., recorded %s...); regenerating it",
                         path, actual[:12], expected[:12])

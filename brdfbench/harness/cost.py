@@ -18,7 +18,7 @@ from . import Measurement, directions
 
 
 def evaluation_throughput(
-    model: Representation, *, batch: int = 2**16, min_time_s: float = 0.1, max_repeats: int = 20,
+    model: Representation, *, batch: int = 2**16, min_time_s: float = 0.03, max_repeats: int = 20,
     seed: int = 0, dtype: torch.dtype = torch.float32,
 ) -> Measurement:
     wi, wo = (t.to(dtype) for t in directions.random_pairs(batch, seed + 1, torch.float64))

@@ -380,3 +380,69 @@ def test_release_other_subsets_load(release):
         m = ds.load(ds.materials[0])
         assert m.category == subset
         assert np.isfinite(m.table.raw).all() and (m.table.values[:, m.table.valid] >= 0).all()
+
+
+# --------------------------------------------------------------------------- the grid-output cache
+
+
+def _cache_files(cache_dir):
+    return sorted((cache_dir / "nbrdf_release").glob("*/*.npy"))
+
+
+def test_cached_load_is_the_evaluated_table_bit_for_bit(fake_release, tmp_path, monkeypatch):
+    """The first load evaluates the network and keeps its outputs; later loads (every job of a
+    sweep) read them back and build the very table the evaluation gives."""
+    monkeypatch.setenv("BRDFBENCH_CACHE", str(tmp_path / "cache"))
+    first = nbrdf_release_dataset(str(fake_release)).load("alpha")
+    files = _cache_files(tmp_path / "cache")
+    assert len(files) == 1 and files[0].with_name(files[0].name + ".sha256").exists()
+    calls = []
+    monkeypatch.setattr("brdfbench.data.nbrdf_release.grid_outputs", lambda w: calls.append(w))
+    again = nbrdf_release_dataset(str(fake_release)).load("alpha")
+    assert calls == []  # read back, not evaluated
+    direct = nbrdf_table(read_nbrdf_h5(fake_release / "merl" / "alpha.h5"))
+    assert again.table.raw.tobytes() == first.table.raw.tobytes() == direct.raw.tobytes()
+
+
+def test_cache_is_keyed_by_the_weights(fake_release, tmp_path, monkeypatch):
+    """A network replaced by another (same file size) is evaluated anew, never served the old outputs."""
+    monkeypatch.setenv("BRDFBENCH_CACHE", str(tmp_path / "cache"))
+    nbrdf_release_dataset(str(fake_release)).load("zeta")
+    alpha, zeta = fake_release / "merl" / "alpha.h5", fake_release / "merl" / "zeta.h5"
+    zeta.write_bytes(alpha.read_bytes())
+    swapped = nbrdf_release_dataset(str(fake_release)).load("zeta")
+    assert swapped.table.raw.tobytes() == nbrdf_table(read_nbrdf_h5(alpha)).raw.tobytes()
+
+
+@pytest.mark.parametrize("damage", ["append", "truncate", "other_array"])
+def test_damaged_cache_file_is_recomputed_with_a_warning(fake_release, tmp_path, monkeypatch, caplog, damage):
+    monkeypatch.setenv("BRDFBENCH_CACHE", str(tmp_path / "cache"))
+    nbrdf_release_dataset(str(fake_release)).load("alpha")
+    (path,) = _cache_files(tmp_path / "cache")
+    if damage == "append":
+        with open(path, "ab") as f:
+            f.write(b"garbage")
+    elif damage == "truncate":
+        path.write_bytes(path.read_bytes()[:1000])
+    else:  # a valid .npy of the right shape, other values: only the content record tells
+        np.save(path, np.zeros(np.load(path).shape, dtype=np.float32))
+    with caplog.at_level("WARNING"):
+        again = nbrdf_release_dataset(str(fake_release)).load("alpha")
+    assert "recomputing" in caplog.text and str(path) in caplog.text
+    assert again.table.raw.tobytes() == nbrdf_table(read_nbrdf_h5(fake_release / "merl" / "alpha.h5")).raw.tobytes()
+    caplog.clear()
+    with caplog.at_level("WARNING"):  # rewritten: the next load is clean
+        nbrdf_release_dataset(str(fake_release)).load("alpha")
+    assert "recomputing" not in caplog.text
+
+
+def test_unwritable_cache_only_costs_the_evaluation(fake_release, tmp_path, monkeypatch, caplog):
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("a file where the cache folder would go")
+    monkeypatch.setenv("BRDFBENCH_CACHE", str(blocker))
+    with caplog.at_level("WARNING"):
+        ds = nbrdf_release_dataset(str(fake_release))
+        a, z = ds.load("alpha"), ds.load("zeta")
+    assert caplog.text.count("cannot write the cache") == 1  # said once, not per material
+    assert a.table.raw.tobytes() == nbrdf_table(read_nbrdf_h5(fake_release / "merl" / "alpha.h5")).raw.tobytes()
+    assert z.table.raw.shape == (3, *merl.SHAPE)

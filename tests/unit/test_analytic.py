@@ -416,3 +416,18 @@ def test_directions_a_hair_above_the_horizon(name, coeffs, dtype):
         out = model(name, **coeffs).eval(wi, wo)
         assert bool(torch.isfinite(out).all() and (out >= 0).all()), (phi, out)
         assert float(out.max()) < 1e-6 * torch.finfo(dtype).max, "saturated: the output clamp, not the model, kept it finite"
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_lambert_albedo_is_the_same_at_any_thread_count(plastic, threads):
+    """The channels' medians are sorted in parallel threads: the albedo is each channel's
+    weighted median exactly as computed alone."""
+    from brdfbench.threads import torch_threads
+    from brdfbench_representations.lambert import weighted_median
+
+    wi, wo = (d[:, 2].numpy() for d in merl.grid_directions())
+    valid = plastic.table.valid.reshape(-1) & merl.grid_above_horizon().numpy()
+    values = plastic.table.values.reshape(3, -1)[:, valid]
+    alone = [math.pi * weighted_median(v, (wi * wo)[valid]) for v in values]
+    with torch_threads(threads):
+        assert Lambert().fit(plastic).albedo.tolist() == alone
