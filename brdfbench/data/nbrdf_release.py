@@ -19,12 +19,13 @@ import os
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from ..errors import ConfigError, DataError
 from ..protocol import Material
 from . import Dataset
 from ..nbrdf.keras_h5 import read_nbrdf_h5
-from .grid_cache import weights_digest
+from .grid_cache import ArrayCache, weights_digest
 from .nbrdf_h5 import grid_cells, grid_outputs, table_from_outputs
 
 ENV_VAR = "BRDFBENCH_NBRDF_DIR"
@@ -108,16 +109,9 @@ def nbrdf_release_dataset(path: str | None = None, subset: str = "merl", limit: 
     digest = hashlib.sha256(json.dumps([FINGERPRINT_VERSION, subset, entries]).encode()).hexdigest()[:16]
     fingerprint = f"nbrdf_release:{subset}:{digest}"
 
-    cache = None
+    cache = ArrayCache("nbrdf_release", f"torch{torch.__version__}")
 
     def load(name: str) -> Material:
-        nonlocal cache
-        if cache is None:
-            import torch
-
-            from .grid_cache import ArrayCache
-
-            cache = ArrayCache("nbrdf_release", f"torch{torch.__version__}")
         h5path = files[name]
         weights = read_nbrdf_h5(h5path)
         outputs = cache.get(weights_digest(weights), lambda: grid_outputs(weights), (grid_cells(), 3), np.float32)
