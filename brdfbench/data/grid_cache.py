@@ -52,8 +52,8 @@ class ArrayCache:
         self._warned = False
 
     def get(self, key: str, compute: Callable[[], np.ndarray], shape: tuple[int, ...], dtype) -> np.ndarray:
-        """The cached array of `key` if it is intact and of this shape and dtype; else
-        compute() (which must return one), stored for the next call."""
+        """The cached array of `key` (read-only, mapped from the file) if it is intact and of
+        this shape and dtype; else compute() (which must return one), stored for the next call."""
         path = self.folder / f"{key}.npy"
         found = self._read(path, shape, np.dtype(dtype))
         if found is not None:
@@ -81,7 +81,7 @@ class ArrayCache:
                         path, actual[:12], f"{expected[:12]}..." if expected else "none")
             return None
         try:
-            array = np.load(path, allow_pickle=False)
+            array = np.load(path, mmap_mode="r", allow_pickle=False)  # read-only, from the page cache
         except (OSError, ValueError) as exc:
             log.warning("%s: unreadable (%s); recomputing it", path, exc)
             return None

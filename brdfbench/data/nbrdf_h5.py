@@ -60,10 +60,9 @@ def grid_cells() -> int:
 def table_from_outputs(outputs: np.ndarray) -> merl.MerlTable:
     """The MERL table of `grid_outputs`: cells at or below the horizon are invalid."""
     _, idx, valid = _grid_input()
-    out = torch.zeros(merl.N_CELLS, 3, dtype=torch.float32)
-    out[idx] = torch.from_numpy(outputs)
-    values = out.T.reshape(3, *merl.SHAPE).numpy()
-    return merl.MerlTable.from_values(values, valid)
+    values = np.zeros((3, merl.N_CELLS), dtype=np.float32)
+    values[:, idx.numpy()] = np.asarray(outputs).T
+    return merl.MerlTable.from_values(values.reshape(3, *merl.SHAPE), valid)
 
 
 def nbrdf_table(weights: dict[str, np.ndarray | torch.Tensor]) -> merl.MerlTable:

@@ -18,7 +18,6 @@ process-wide caches of the grid and random directions it reads.
 from __future__ import annotations
 
 import weakref
-from dataclasses import dataclass
 from functools import cached_property, lru_cache, partial
 from typing import Any, Callable
 
@@ -67,7 +66,6 @@ class _Pairs:
     def __init__(self, wi: torch.Tensor, wo: torch.Tensor, dtype: torch.dtype, chunk: int):
         self.wi, self.wo, self.dtype, self.chunk = wi, wo, dtype, chunk
         self._data: dict[tuple, Any] = {}
-        self._last: _Selection | None = None
 
     @cached_property
     def typed(self) -> tuple[torch.Tensor, torch.Tensor]:
@@ -88,19 +86,10 @@ class _Pairs:
     def _provide(self, index: torch.Tensor, fn: Callable[..., Any], args: tuple) -> Any:
         return _rows_of(self.data(fn, args), index)
 
-    def select(self, mask: torch.Tensor):
-        """(index of the pairs where `mask` holds, their fp64 cos θi, generator of (slice, wi,
-        wo) chunks of them in the dtype): what the model is evaluated at; each chunk is
-        registered for `reused`. Most materials of a set share their mask, so the last
-        selection is kept and reused while the mask is equal and its tensors unmodified."""
-        last = self._last
-        if last is None or not torch.equal(last.mask, mask) or last.versions != last.current_versions():
-            index = mask.nonzero().squeeze(1)
-            wi, wo = (t.index_select(0, index) for t in self.typed)
-            last = _Selection(mask.clone(), index, wi, wo, self.cos.index_select(0, index))
-            last.versions = last.current_versions()
-            self._last = last
-        index, wi, wo = last.index, last.wi, last.wo
+    def select(self, index: torch.Tensor):
+        """(fp64 cos θi of the pairs at `index`, generator of (slice, wi, wo) chunks of them in
+        the dtype): what the model is evaluated at; each chunk is registered for `reused`."""
+        wi, wo = (t.index_select(0, index) for t in self.typed)
 
         def batches():
             for s in _chunks(wi.shape[0], self.chunk):
@@ -108,21 +97,7 @@ class _Pairs:
                 reused.register(a, b, partial(self._provide, index[s]))
                 yield s, a, b
 
-        return index, last.cos, batches()
-
-
-@dataclass(eq=False)
-class _Selection:
-    mask: torch.Tensor
-    index: torch.Tensor
-    wi: torch.Tensor
-    wo: torch.Tensor
-    cos: torch.Tensor
-    versions: tuple[int, ...] = ()
-
-    def current_versions(self) -> tuple[int, ...]:
-        """In-place changes to what models and metrics were handed (a plugin's bug) show here."""
-        return tuple(t._version for t in (self.index, self.wi, self.wo, self.cos))
+        return self.cos.index_select(0, index), batches()
 
 
 class AccuracyGeometry:
@@ -178,8 +153,9 @@ def _rows(channels: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
 def _score(model: Representation, pairs: _Pairs, mask: torch.Tensor, ref: torch.Tensor, metrics: list) -> None:
     """Update `metrics` with the model against the reference at the pairs where `mask`
     holds; `ref` is channel-major (3, N)."""
-    index, cos, batches = pairs.select(mask)
+    index = mask.nonzero().squeeze(1)
     ref = _rows(ref, index)
+    cos, batches = pairs.select(index)
     for s, a, b in batches:
         pred = model.eval(a, b)
         for m in metrics:

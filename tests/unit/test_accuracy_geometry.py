@@ -5,7 +5,6 @@ must never serve data for other directions or settings."""
 
 import gc
 
-import numpy as np
 import pytest
 import torch
 
@@ -104,46 +103,6 @@ def test_fp64_cached_scores_equal_uncached(specs, materials):
     model = _fit("merl", second)
     got = _cached(model, second, specs, dtype=torch.float64)
     assert got == uncached_accuracy(model, second, specs, n_random=N_RANDOM, dtype=torch.float64)
-
-
-class _Vandal:
-    """A buggy plugin: evaluates correctly, then scribbles over the directions it was handed."""
-
-    def __init__(self, model):
-        self.model = model
-
-    def eval(self, wi, wo):
-        out = self.model.eval(wi, wo)
-        wi.mul_(-1.0)
-        wo.zero_()
-        return out
-
-
-def test_selection_shared_by_materials_survives_a_plugin_writing_to_its_inputs(specs, materials):
-    """Materials with equal masks share one selection of the pairs; a plugin that changes
-    its inputs in place must not change what the next material is scored at."""
-    first, second = materials
-    raw = np.abs(second.table.raw)
-    raw[:, ~first.table.valid] = merl.INVALID_RAW
-    second = Material("second", merl.MerlTable(raw), second.category)
-    assert np.array_equal(first.table.valid, second.table.valid)  # one mask: the selection is shared
-    accuracy_geometry.cache_clear()
-    _cached(_Vandal(_fit("merl", first)), first, specs)
-    model = _fit("ggx", second)
-    assert _cached(model, second, specs) == uncached_accuracy(model, second, specs, n_random=N_RANDOM)
-
-
-def test_selection_follows_the_mask(specs, materials):
-    """A material with other invalid cells gets its own selection (and the right scores)."""
-    first, second = materials
-    accuracy_geometry.cache_clear()
-    _cached(_fit("merl", first), first, specs)
-    raw = second.table.raw.copy()
-    raw[:, 10:20] = merl.INVALID_RAW
-    holed = Material("holed", merl.MerlTable(raw), second.category)
-    assert not np.array_equal(holed.table.valid, first.table.valid)
-    model = _fit("lambert", holed)
-    assert _cached(model, holed, specs) == uncached_accuracy(model, holed, specs, n_random=N_RANDOM)
 
 
 @pytest.fixture(scope="module")
