@@ -12,6 +12,8 @@ from typing import Any
 
 import pandas as pd
 
+from brdfbench.harness.lobes import TARGET_HALF_WIDTH
+
 #: Columns shown beside accuracy, with the aggregate that makes sense for each: costs, and a
 #: model's own final fit loss (each family's own objective: not comparable across families,
 #: so never ranked).
@@ -32,7 +34,6 @@ COST_METRICS = {
 }
 #: Properties of a cell's target, not figures of its model: never columns; the report groups
 #: materials by them (the sharpest tenth by `target_lobe_half_width`, rad).
-TARGET_HALF_WIDTH = "target_lobe_half_width"
 TARGET_PROPERTIES = (TARGET_HALF_WIDTH,)
 #: Cost figures that depend on the machine's load (timings), flagged when measured under contention.
 TIMED = ("fit_time", "train_time", "evals_per_s", "render_time", "render_samples_per_s")

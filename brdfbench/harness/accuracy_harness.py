@@ -12,10 +12,9 @@ from typing import ClassVar
 import torch
 
 from . import Harness, HarnessConfig, Measurement
+from .lobes import TARGET_HALF_WIDTH
 
 DEFAULT_METRICS = ("l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae")
-#: A property of the target, not a figure of the model (see brdfbench.harness.lobes.table_half_width)
-TARGET_HALF_WIDTH = "target_lobe_half_width"
 
 
 @dataclass(frozen=True)

@@ -120,6 +120,11 @@ def lobe_half_width(theta_h, values) -> float:
     return float(theta_h[j - 1] + t * (theta_h[j] - theta_h[j - 1]))
 
 
+#: The metric under which the accuracy harness stores `table_half_width` (rad): a property
+#: of the target, not a figure of the model; the report reads it by this name.
+TARGET_HALF_WIDTH = "target_lobe_half_width"
+
+
 def peak_row(table: "MerlTable") -> np.ndarray:
     """A table's θd = φd = 0 row (cell 0 of each), (90, 3) float64 in 1/sr, NaN where invalid."""
     row = np.asarray(table.values[:, :, 0, 0], dtype=np.float64).T.copy()
