@@ -15,6 +15,10 @@ which determinism checks compare and the non-finite check reads per sample.
 
 State for saving is a flat dict of tensors plus JSON-able metadata, as for
 representations (`brdfbench.modelio.save_generator`): loading never runs code.
+
+Devices: as for representations (`brdfbench.device.Placed`): a generator whose class lists
+"cuda" in `devices` trains and samples on the device it was moved to with `to`; its
+samples may live there too, and evaluate inputs on their own device.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 
+from .device import Placed
 from .errors import ConfigError, DataError
 from .protocol import Material, Representation
 
@@ -167,7 +172,7 @@ def available_memory() -> int:
 MEMORY_SHARE = 0.5
 
 
-class Generator(ABC):
+class Generator(Placed, ABC):
     """Base class for material generators; see the module docstring.
 
     Subclasses implement `fit`, `_sample`, `sample_nbytes`, `state_dict` / `from_state`;

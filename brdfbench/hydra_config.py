@@ -16,7 +16,7 @@ JOB_SUMMARY = "brdfbench_job.json"
 #: Top-level keys of config.yaml besides the groups; anything else is a typo.
 TOP_LEVEL = {"representation", "generator", "dataset", "harness", "scene", "seed", "materials", "limit", "results_dir",
              "save_models",
-             "isolate", "progress", "store", "store_params"}
+             "isolate", "progress", "store", "store_params", "device"}
 
 
 def _section(cfg: DictConfig, key: str) -> dict:
@@ -103,6 +103,7 @@ def to_run_config(cfg: DictConfig, job: str = "") -> RunConfig:
         store_params=_section(cfg, "store_params"),
         isolate=_value(cfg, "isolate", True),
         progress=_value(cfg, "progress", "auto"),
+        device=_value(cfg, "device", "auto"),
         launcher=choices.get("hydra/launcher", "basic"),
         job=job,
     )

@@ -4,7 +4,11 @@ A representation evaluates RGB BRDF values (N, 3), not cosine-weighted, in MERL 
 (1/sr), on unit direction pairs (N, 3) in the local shading frame (z = normal): ωi points
 toward the light, ωo toward the viewer (MERL's θin / θout), both away from the surface. Pairs
 with either direction at or below the horizon evaluate to 0. The output dtype follows
-the input dtype (fp32 or fp64).
+the input dtype (fp32 or fp64), and its device the inputs' device.
+
+Devices: a representation runs on the CPU unless its class lists another device type in
+`devices` and is moved there with `to(device)` (see `brdfbench.device.Placed`): then it
+fits there and evaluates inputs that live there.
 
 State for saving is a flat dict of tensors plus a JSON-able dict of metadata, so that
 `brdfbench.modelio` can store it as safetensors and loading never runs code.
@@ -19,6 +23,7 @@ from typing import Any, ClassVar, Iterable, Sequence
 import torch
 
 from .coords import above_horizon
+from .device import Placed
 from .merl import MerlTable
 
 
@@ -35,7 +40,7 @@ class Material:
 FIT_LOSS_KEY = "fit_loss"
 
 
-class Representation(ABC):
+class Representation(Placed, ABC):
     """Base class for BRDF representations.
 
     Subclasses implement `_eval` (directions already known to be above the horizon),
@@ -59,7 +64,7 @@ class Representation(ABC):
         mask = above_horizon(wi, wo)
         if bool(mask.all()):  # the common case: no masked copies
             return self._eval(wi, wo).to(wi.dtype)
-        out = torch.zeros(wi.shape[0], 3, dtype=wi.dtype)
+        out = torch.zeros(wi.shape[0], 3, dtype=wi.dtype, device=wi.device)
         if mask.any():
             out[mask] = self._eval(wi[mask], wo[mask]).to(wi.dtype)
         return out
@@ -81,8 +86,14 @@ class Representation(ABC):
 
     def fit_many(self, targets: Sequence[Material], *, seed: int = 0, progress: bool | str = False) -> list["Representation"]:
         """One fitted model per target, in order; representations that fit several materials
-        faster together (stacked networks) override this. `self` is left unfitted."""
-        return [type(self)(**self.params).fit(t, seed=seed) for t in targets]
+        faster together (stacked networks) override this. `self` is left unfitted; the
+        models fit on `self.device`."""
+        return [self._unfitted().fit(t, seed=seed) for t in targets]
+
+    def _unfitted(self) -> "Representation":
+        """A new unfitted model with these params, on this model's device."""
+        model = type(self)(**self.params)
+        return model if self.device.type == "cpu" else model.to(self.device)
 
     # -- training (representations with state shared across materials) ------------
     #: True for representations that learn shared state (e.g. a PCA basis) from a

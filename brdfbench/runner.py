@@ -61,8 +61,9 @@ def _run_isolated(cfg: RunConfig, plan, recorder: Recorder, on_cell, on_note) ->
             finished.add(message[0])
             on_cell(message)
 
-        recorder.environment(environment(worker.ensure().threads, cfg.launcher))
-        outcome = worker.run(cfg, task, cell, on_note)
+        recorder.environment(environment(worker.ensure().threads, cfg.launcher, worker.device))
+        outcome = worker.run(cfg, task, cell, on_note,
+                             on_device=lambda device: recorder.environment(environment(worker.threads, cfg.launcher, device)))
         # a hang or a crash: the task's unfinished cells fail with its cause (and none is ever lost)
         message = outcome.message or "the worker finished its task without a result for this material"
         for name in task.materials:
@@ -74,8 +75,8 @@ def _run_inline(cfg: RunConfig, plan, recorder: Recorder, on_cell, on_note) -> N
     import torch
 
     log.warning("isolate=false: cells run in this process with no time limit")
-    recorder.environment(environment(torch.get_num_threads(), cfg.launcher))
     state = job_state(cfg)
+    recorder.environment(environment(torch.get_num_threads(), cfg.launcher, state.recorded_device))
     marker = ActiveMarker()
 
     def emit(message: tuple) -> None:

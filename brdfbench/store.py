@@ -1,9 +1,10 @@
 """The results store: typed rows in SQLite, one transaction per benchmark cell.
 
-Schema v3 (`PRAGMA user_version = 3`):
+Schema v4 (`PRAGMA user_version = 4`):
 - `configs`: config hash → label, plugin, its version, harness, and the resolved
   parameters behind the hash (JSON), so two configurations never share a row;
-- `environments`: where figures were measured (host, CPU model, cores, threads, launcher);
+- `environments`: where figures were measured (host, CPU model, cores, threads, launcher,
+  and the device that computed them: "cpu" or a GPU with its model and versions);
 - `results`: one row per (configuration, dataset fingerprint, scope, material or set,
   category, metric, distance, spp) — a unique key, so concurrent writers cannot duplicate
   a cell — with typed scene / sampler / spp / scope / distance columns and the environment
@@ -11,7 +12,7 @@ Schema v3 (`PRAGMA user_version = 3`):
 
 A cell is (config hash, dataset fingerprint, scope, material): `write_cell` replaces a
 failed cell and leaves a finished one as it is (the first complete writer wins), so
-writing is idempotent. Stores written by v1 (no user_version) and v2 migrate in one transaction.
+writing is idempotent. Stores written by v1 (no user_version), v2 and v3 migrate in one transaction.
 A store that cannot be read or written is a DataError naming the file and what to do.
 """
 
@@ -28,7 +29,7 @@ from typing import Any, Iterator
 import pandas as pd
 
 from .errors import DataError
-from .store_migrations import migrate_v1, migrate_v2
+from .store_migrations import migrate_v1, migrate_v2, migrate_v3
 from .store_protocol import CELL, ConfigRecord, Environment, Row, Store
 from .store_schema import SCHEMA, SCHEMA_VERSION
 
@@ -78,8 +79,8 @@ class ResultsStore(Store):
                 raise DataError(f"{self.path}: schema v{version} store lacks table(s) {', '.join(sorted(missing))}; "
                                 "move it aside and run again")
             return
-        if version == 2 and {"configs", "environments", "results"} <= tables:
-            migrate_v2(con, self.path)
+        if version in (2, 3) and {"configs", "environments", "results"} <= tables:
+            (migrate_v2 if version == 2 else migrate_v3)(con, self.path)
             return
         if version > SCHEMA_VERSION:
             raise DataError(f"{self.path}: written by a newer brdfbench (schema v{version}, this one reads up to "
@@ -146,7 +147,9 @@ class ResultsStore(Store):
 
     def write_environment(self, env: Environment) -> None:
         with self._transaction() as con:
-            con.execute("INSERT OR IGNORE INTO environments VALUES (?, ?, ?, ?, ?, ?, ?)", tuple(asdict(env).values()))
+            names = [f.name for f in fields(Environment)]
+            con.execute(f"INSERT OR IGNORE INTO environments ({', '.join(names)}) VALUES ({', '.join('?' * len(names))})",
+                        tuple(asdict(env).values()))
 
     # -- cells -------------------------------------------------------------------
     def done_cells(self, config_hash: str, dataset_fingerprint: str, scope: str = "material") -> set[str]:
@@ -217,7 +220,8 @@ class ResultsStore(Store):
                " COALESCE(c.harness, '') AS harness, COALESCE(c.params, 'null') AS params,"
                " COALESCE(e.host, '') AS host, COALESCE(e.cpu_model, '') AS cpu_model,"
                " COALESCE(e.cpu_count, 0) AS cpu_count, COALESCE(e.threads, 0) AS threads,"
-               " COALESCE(e.launcher, '') AS launcher"
+               " COALESCE(e.launcher, '') AS launcher, COALESCE(e.device, 'cpu') AS device,"
+               " COALESCE(e.device_detail, 'cpu') AS device_detail"
                " FROM results r LEFT JOIN configs c ON c.config_hash = r.config_hash"
                " LEFT JOIN environments e ON e.env_id = r.env_id" + (f" WHERE {clause}" if clause else ""))
         with self._connection() as con:

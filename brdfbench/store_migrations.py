@@ -11,6 +11,9 @@ is written in the current schema directly.
 v2: as v3 without the `distance` column, and a unique key without `category` and
 `distance` (set-level rows need both: MMD over each distance, a count per category). The
 results table is rebuilt with every row carried over (`distance` = "").
+
+v3: as v4 without the environments' `device` and `device_detail` columns; every figure of
+a v3 store was computed on the CPU, which the columns' default says.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from .errors import DataError
-from .store_schema import SCHEMA, SCHEMA_VERSION, UNKNOWN_ENV
+from .store_schema import DEVICE_COLUMNS, SCHEMA, SCHEMA_VERSION, UNKNOWN_ENV
 
 _INFIX = "/convergence/"
 _RUNG = re.compile(r"^(?P<base>.+)@spp=(?P<spp>\d+)$")
@@ -84,9 +87,28 @@ def migrate_v2(con: sqlite3.Connection, path: Path) -> int:
         columns = ", ".join(V2_COLUMNS)
         n = con.execute(f"INSERT INTO results ({columns}) SELECT {columns} FROM results_v2 ORDER BY rowid").rowcount
         con.execute("DROP TABLE results_v2")
+        _add_device_columns(con)
         return n
 
     return _migrate(con, path, V2_COLUMNS, "a v2 results table without column(s)", rewrite)
+
+
+def migrate_v3(con: sqlite3.Connection, path: Path) -> int:
+    """Add v4's device columns to a v3 store's environments, in one transaction; returns the
+    results rows (all kept as they are)."""
+
+    def rewrite(have: list[str]) -> int:
+        _add_device_columns(con)
+        return con.execute("SELECT COUNT(*) FROM results").fetchone()[0]
+
+    return _migrate(con, path, V2_COLUMNS + ("distance",), "a v3 results table without column(s)", rewrite)
+
+
+def _add_device_columns(con: sqlite3.Connection) -> None:
+    have = {r[1] for r in con.execute("PRAGMA table_info(environments)")}
+    for name, definition in DEVICE_COLUMNS:
+        if name not in have:
+            con.execute(f"ALTER TABLE environments ADD COLUMN {name} {definition}")
 
 
 def migrate_v1(con: sqlite3.Connection, path: Path) -> int:

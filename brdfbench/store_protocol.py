@@ -73,6 +73,8 @@ class Environment:
     threads: int
     launcher: str
     platform: str
+    device: str = "cpu"  # where the figures were computed: "cpu" or "cuda:N"
+    device_detail: str = "cpu"  # a GPU's model, memory, capability, driver, CUDA and torch versions
 
 
 #: The columns of a cell's key.

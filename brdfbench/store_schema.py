@@ -1,6 +1,6 @@
-"""The results store's SQL schema (v3), shared by the store and its migrations."""
+"""The results store's SQL schema (v4), shared by the store and its migrations."""
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 SCHEMA = """
 CREATE TABLE configs (
@@ -18,7 +18,9 @@ CREATE TABLE environments (
     cpu_count INTEGER NOT NULL,
     threads INTEGER NOT NULL,
     launcher TEXT NOT NULL,
-    platform TEXT NOT NULL
+    platform TEXT NOT NULL,
+    device TEXT NOT NULL DEFAULT 'cpu',
+    device_detail TEXT NOT NULL DEFAULT 'cpu'
 );
 CREATE TABLE results (
     run_id TEXT NOT NULL,
@@ -51,3 +53,7 @@ CREATE INDEX results_cell ON results (config_hash, dataset_fingerprint, scope, m
 
 #: The environment of rows migrated from a v1 store, which recorded none.
 UNKNOWN_ENV = "unknown"
+
+#: Columns v4 added to `environments` (where a figure was computed), with their SQL
+#: definitions: figures of older stores were all computed on the CPU.
+DEVICE_COLUMNS = (("device", "TEXT NOT NULL DEFAULT 'cpu'"), ("device_detail", "TEXT NOT NULL DEFAULT 'cpu'"))

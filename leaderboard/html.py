@@ -20,6 +20,7 @@ from .markdown import fmt, sharpness_caption
 from .view import Cell, ConvergenceSection, Metric, TableSection
 
 CONTENDED = "†"
+ON_GPU = "‡"
 
 
 def _e(text) -> str:
@@ -48,8 +49,10 @@ def _number(value: float | None) -> str:
 def _cell(c: Cell | None, metric: Metric, best: bool = False) -> str:
     if c is None:
         return '<td class="missing" data-sort="" title="no figure">–</td>'
-    mark = CONTENDED if metric.timed and c.contended else ""
+    mark = (CONTENDED if metric.timed and c.contended else "") + (ON_GPU if metric.timed and c.accelerator else "")
     detail = f"median {fmt(c.median)}, worst {fmt(c.worst)}, {c.n}/{c.expected} materials"
+    if metric.timed and c.accelerator:
+        detail += f"; measured on a GPU ({c.accelerator})"
     if not c.complete:
         partial = f"partial {metric.aggregate} {fmt(c.partial)} over {c.n}/{c.expected} materials"
         return (f'<td class="missing" data-sort="" title="{_e(partial)}">–'
@@ -63,7 +66,7 @@ def _best(section: TableSection, metric: Metric) -> str | None:
     """The config hash with the best complete figure of a directed metric."""
     if not metric.directed:
         return None
-    ranked = section.ranking(metric.name)
+    ranked = section.timing_peers(metric.name)
     if ranked and ranked[0].cell(metric.name) is not None and ranked[0].cell(metric.name).complete:
         return ranked[0].config_hash
     return None
@@ -137,6 +140,10 @@ def table_section(s: TableSection, sid: str, results_dir: Path | None = None) ->
     if s.contended:
         out.append(f'<p class="note">{CONTENDED} measured while other brdfbench jobs ran on the same host: timings '
                    "are not comparable with unmarked ones.</p>")
+    if s.accelerators:
+        out.append(f'<p class="note">{ON_GPU} computed on a GPU ({_e(", ".join(s.accelerators))}): these timings are '
+                   "not comparable with CPU ones, and a column that holds both marks its best among the CPU "
+                   "figures.</p>")
     out += _chart(s, sid)
     if results_dir is not None and s.harness == "accuracy":
         out += _lobes(s, sid, results_dir)

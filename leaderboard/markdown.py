@@ -13,6 +13,7 @@ from .view import Cell, ConvergenceSection, Metric, TableSection
 
 #: Marks a timing measured while other brdfbench jobs ran on the same host.
 CONTENDED = "†"
+ON_GPU = "‡"
 
 
 def fmt(value: float | None) -> str:
@@ -35,7 +36,8 @@ def cell_text(cell: Cell | None, metric: Metric | None = None) -> str:
     """The cell's figure; an incomplete one as "–" with its partial figure and what is missing."""
     if cell is None:
         return "–"
-    mark = CONTENDED if metric is not None and metric.timed and cell.contended else ""
+    timed = metric is not None and metric.timed
+    mark = (CONTENDED if timed and cell.contended else "") + (ON_GPU if timed and cell.accelerator else "")
     if cell.complete:
         return fmt(cell.value) + mark
     if cell.partial is None:
@@ -85,6 +87,8 @@ def table_section(s: TableSection) -> list[str]:
         "",
         *([f"{CONTENDED} measured while other brdfbench jobs ran on the same host: timings are not comparable "
            "with unmarked ones.", ""] if s.contended else []),
+        *([f"{ON_GPU} computed on a GPU ({', '.join(s.accelerators)}): these timings are not comparable with CPU "
+           "ones.", ""] if s.accelerators else []),
         "### Per metric",
         "",
     ]

@@ -26,6 +26,7 @@ class Point:
     y: float
     lo: float | None
     hi: float | None
+    gpu: bool = False  # its cost is a timing computed on a GPU (never on the same front as CPU timings)
 
 
 @dataclass(frozen=True)
@@ -76,9 +77,11 @@ def chart(section: TableSection) -> Chart | None:
             if y is None or x is None or not (y.complete and x.complete) or y.value <= 0 or x.value <= 0:
                 omitted.append(row.label)
                 continue
-            points.append(Point(row, x.value, y.value, y.lo, y.hi))
+            points.append(Point(row, x.value, y.value, y.lo, y.hi, bool(cost.timed and x.accelerator)))
         if points:
-            panels.append(Panel(cost, points, pareto_front(points, cost.higher_is_better, primary.higher_is_better),
+            # a front compares like with like: where CPU and GPU timings mix, it runs through the CPU ones
+            peers = [p for p in points if not p.gpu] or points
+            panels.append(Panel(cost, points, pareto_front(peers, cost.higher_is_better, primary.higher_is_better),
                                 omitted))
     if not panels:
         return None
@@ -128,7 +131,7 @@ def figure(c: Chart, plot_id: str) -> str:
             parts.append(f'<circle cx="{x:.1f}" cy="{y:.1f}" r="3.5" fill="{colour}" stroke="{edge}" '
                          'stroke-width="0.8"/>')
             parts.append(f'<text x="{x + 5:.1f}" y="{y - 4:.1f}" font-size="8" fill="{colour}">'
-                         f"{svg_plot.escape(p.row.label)}</text></g>")
+                         f"{svg_plot.escape(p.row.label + (' ‡ GPU' if p.gpu else ''))}</text></g>")
             out.append("".join(parts))
     out.append("</svg>")
     return "".join(out)

@@ -39,7 +39,14 @@ TARGET_PROPERTIES = (TARGET_HALF_WIDTH,)
 TIMED = ("fit_time", "train_time", "evals_per_s", "render_time", "render_samples_per_s")
 
 _DEFAULTS = {"config_hash": None, "params": "null", "spp": 0, "sampler": "", "scene": "brdf_space", "harness": None,
-             "concurrent_jobs": 1, "scope": "material", "distance": ""}
+             "concurrent_jobs": 1, "scope": "material", "distance": "", "device": "cpu", "device_detail": "cpu"}
+
+
+def accelerator(detail: str) -> str:
+    """The model of the accelerator a figure was computed on ("" for the CPU): the first part
+    of the environment's `device_detail`, e.g. "NVIDIA H200"."""
+    detail = str(detail or "cpu")
+    return "" if detail == "cpu" else detail.split(",")[0].strip()
 
 
 def normalise(df: pd.DataFrame) -> pd.DataFrame:

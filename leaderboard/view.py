@@ -87,6 +87,7 @@ class Cell:
     worst: float | None = None
     partial: float | None = None  # the aggregate over the materials that have one (shown as such, never ranked)
     contended: bool = False  # measured while other brdfbench jobs ran on the host
+    accelerator: str = ""  # the GPU (model) its figures were computed on; "" for the CPU
 
     @property
     def missing(self) -> int:
@@ -174,6 +175,21 @@ class TableSection:
     def contended(self) -> bool:
         return any(c.contended for r in self.rows for name, c in r.cells.items() if self.metrics[name].timed)
 
+    @property
+    def accelerators(self) -> list[str]:
+        """The GPUs that computed some timed figure of the section (their cells are marked)."""
+        return sorted({c.accelerator for r in self.rows for name, c in r.cells.items()
+                       if self.metrics[name].timed and c.accelerator})
+
+    def timing_peers(self, metric: str) -> list[Row]:
+        """The rows whose figure of a timed metric compares with the best CPU one: where a
+        column mixes GPU and CPU timings, only the CPU ones (GPU cells are marked, never ranked)."""
+        rows = self.ranking(metric)
+        if not self.metrics[metric].timed:
+            return rows
+        on_cpu = [r for r in rows if r.cell(metric) is None or not r.cell(metric).accelerator]
+        return on_cpu if len(on_cpu) < len(rows) and on_cpu else rows
+
 
 @dataclass(frozen=True)
 class ConvergenceRow:
@@ -231,10 +247,10 @@ def _aggregate(values: np.ndarray, how: str) -> float:
     return float({"mean": np.mean, "median": np.median, "max": np.max}[how](values))
 
 
-def _cell(values: np.ndarray, metric: Metric, expected: int, contended: bool) -> Cell:
+def _cell(values: np.ndarray, metric: Metric, expected: int, contended: bool, accelerator: str = "") -> Cell:
     n = int(values.size)
     if n == 0:
-        return Cell(None, 0, expected, contended=contended)
+        return Cell(None, 0, expected, contended=contended, accelerator=accelerator)
     agg = _aggregate(values, metric.aggregate)
     worst = float(values.min() if metric.higher_is_better else values.max())
     lo = hi = None
@@ -242,7 +258,7 @@ def _cell(values: np.ndarray, metric: Metric, expected: int, contended: bool) ->
         lo, hi = bootstrap_interval(values)
     complete = n >= expected
     return Cell(agg if complete else None, n, expected, lo if complete else None, hi if complete else None,
-                float(np.median(values)), worst, None if complete else agg, contended)
+                float(np.median(values)), worst, None if complete else agg, contended, accelerator)
 
 
 def shown(cell: Cell | None) -> float | None:
@@ -300,7 +316,8 @@ def table_section(key: tuple[str, str, str, str], df: pd.DataFrame, widths: dict
                 continue
             values = got.drop_duplicates("material", keep="last")["value"].to_numpy(dtype=float)
             contended = bool((got["concurrent_jobs"] > 1).any())
-            cells[metric.name] = _cell(values, metric, len(materials), contended)
+            gpus = sorted({tables.accelerator(d) for d in got.get("device_detail", pd.Series(["cpu"]))} - {""})
+            cells[metric.name] = _cell(values, metric, len(materials), contended, " and ".join(gpus))
         rows.append(Row(conf.config_hash, conf.representation, getattr(conf, "plugin", "") or "",
                         tables._params(conf.params), None, cells))
     primary = accuracy[0] if accuracy else None

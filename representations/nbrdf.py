@@ -37,6 +37,9 @@ from .nbrdf_fit import Recipe, fit_batched
 
 DEFAULT_HIDDEN = net.PUBLISHED_HIDDEN
 DEFAULT_BATCH_MATERIALS = 16
+#: Materials fitted together on a GPU at least: a step there costs about the same for 16 or
+#: 128 stacked networks (a fit does not depend on its batch-mates, so only speed changes).
+GPU_BATCH_MATERIALS = 128
 
 
 def material_seed(seed: int, name: str) -> int:
@@ -76,6 +79,7 @@ class NeuralBRDF(Representation):
 
     features: ClassVar[str] = "rusinkiewicz"
     plugin_name: ClassVar[str] = "nbrdf"
+    devices = frozenset({"cpu", "cuda"})
     #: `loss` where a config leaves it out (null); see nbrdf_fit and NaiveMLP
     default_loss: ClassVar[str] = Recipe.loss
 
@@ -161,7 +165,12 @@ class NeuralBRDF(Representation):
     # -- fitting -----------------------------------------------------------------
     @property
     def fit_batch_size(self) -> int:
-        return self.batch_materials
+        return self.batch_materials if self.device.type == "cpu" else max(self.batch_materials, GPU_BATCH_MATERIALS)
+
+    def _move(self, device: torch.device) -> None:
+        if self.weights is not None:  # an unfitted model holds nothing (and initialises no device)
+            self.weights = {k: v.to(device) for k, v in self.weights.items()}
+            self.output_scale = self.output_scale.to(device)
 
     def fit(self, target: Material, *, seed: int = 0) -> "NeuralBRDF":
         fitted = self.fit_many([target], seed=seed)[0]
@@ -193,13 +202,17 @@ class NeuralBRDF(Representation):
     def _fit_group(self, group, inits, seed, progress) -> list["NeuralBRDF"]:
         outcomes = fit_batched(
             [t.table for t in group], inits, features=self.features, recipe=self.recipe,
-            output_scale=self.output_scale, sample_seed=seed, progress=progress,
+            output_scale=self.output_scale, sample_seed=seed, progress=progress, device=self.device,
         )
         fitted = []
         for target, outcome in zip(group, outcomes):
             model = type(self)(**self._fit_params)
+            if self.device.type != "cpu":
+                model.to(self.device)
             model._anchor = self._anchor
             model.weights = outcome.weights
+            if self.device.type != "cpu":
+                model.output_scale = model.output_scale.to(self.device)
             model.fit_info = {FIT_LOSS_KEY: outcome.loss, "epochs": outcome.epochs, "fitted_to": target.name}
             if self.recipe.loss == "l1_or_l2":
                 model.fit_info["descended"] = outcome.descended

@@ -25,10 +25,20 @@ Early stop: in the second half of the schedule (where the learning rate anneals 
 loss falls steadily; earlier, a plateau at a high rate is noise), a material leaves the
 batch — its rows are compacted out, which makes the remaining epochs cheaper — once its
 epoch loss improved by less than `min_improvement` (relative) over `patience` epochs.
+
+On a GPU (`device`), the samples, targets and stacked weights move there once per call;
+each step gathers its minibatch there by index, the Adam step reads its schedule (learning
+rate and bias corrections, precomputed for the whole run) from device memory, and the
+epoch's losses accumulate there, so the host never waits for the device inside an epoch.
+The step is captured once as a CUDA graph per batch shape and replayed (`cuda_graphs`;
+recaptured when early stops shrink the stack): a step of ~90 small kernels then costs one
+launch instead of ~90 from Python. The arithmetic is the CPU path's, reassociated in the
+Adam update only; a GPU fit is not the CPU fit bit for bit (see tests/gpu).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
@@ -50,6 +60,11 @@ ONECYCLE_WARMUP = 0.1  # fraction of the steps spent warming up
 ONECYCLE_START_DIV = 25.0  # the warm-up starts at lr / 25
 ONECYCLE_END_DIV = 1e4  # and the cosine anneal ends at lr / 1e4
 COS_MIN = 1e-7  # cos θi is clamped into [COS_MIN, 1 − 2⁻²⁴] inside the log-space loss
+
+log = logging.getLogger(__name__)
+#: Tests set this to run the GPU path's arithmetic (scheduled Adam, index gathers, device
+#: accumulators; no graphs) on the CPU, where CI can check it against the CPU path.
+_DEVICE_PATH_ON_CPU = False
 
 
 @dataclass(frozen=True)
@@ -190,14 +205,36 @@ def adam_update(p: torch.Tensor, m: torch.Tensor, v: torch.Tensor, lr: float, st
     p.grad = None
 
 
+@torch.no_grad()
+def adam_update_scheduled(p: torch.Tensor, m: torch.Tensor, v: torch.Tensor, hyper: torch.Tensor,
+                          betas: tuple[float, float] = ADAM_BETAS, eps: float = ADAM_EPS) -> None:
+    """`adam_update` with the step's scalars in a device tensor `hyper` = (lr / (1 − β₁ᵗ),
+    1 / (1 − β₂ᵗ)): no host value enters the kernels, so a step can be captured and replayed."""
+    b1, b2 = betas
+    g = p.grad
+    m.mul_(b1).add_(g, alpha=1 - b1)
+    v.mul_(b2).addcmul_(g, g, value=1 - b2)
+    denom = (v * hyper[1]).sqrt_().add_(eps)
+    p.addcdiv_(m * hyper[0], denom, value=-1.0)
+    p.grad = None
+
+
+def adam_schedule(recipe: "Recipe", total: int, device: torch.device,
+                  betas: tuple[float, float] = ADAM_BETAS) -> torch.Tensor:
+    """(total, 2) float32 on `device`: each step's `hyper` for `adam_update_scheduled`."""
+    b1, b2 = betas
+    rows = [(learning_rate(recipe, s, total) / (1 - b1 ** (s + 1)), 1 / (1 - b2 ** (s + 1))) for s in range(total)]
+    return torch.tensor(rows, dtype=torch.float32).to(device)
+
+
 class _Stack:
     """Stacked weights of the active materials with their Adam moments."""
 
-    def __init__(self, inits: Sequence[dict[str, torch.Tensor]], names: list[str]):
+    def __init__(self, inits: Sequence[dict[str, torch.Tensor]], names: list[str], device: torch.device = torch.device("cpu")):
         self.names = names
         self.params = []
         for name in names:
-            t = torch.stack([w[name].to(torch.float32) for w in inits])
+            t = torch.stack([w[name].to(torch.float32) for w in inits]).to(device)
             if name.startswith("b"):
                 t = t[:, None, :]  # (M, 1, out): broadcasts over the minibatch
             self.params.append(t.contiguous().requires_grad_())
@@ -222,7 +259,16 @@ class _Stack:
         for p, m, v in zip(self.params, self.m, self.v):
             adam_update(p, m, v, lr, self.t)
 
+    @torch.no_grad()
+    def adam_step_scheduled(self, hyper: torch.Tensor) -> None:
+        for p, m, v in zip(self.params, self.m, self.v):
+            adam_update_scheduled(p, m, v, hyper)
+
+    def state(self) -> list[torch.Tensor]:
+        return [*self.params, *self.m, *self.v]
+
     def keep(self, rows: torch.Tensor) -> None:
+        rows = rows.to(self.params[0].device)
         with torch.no_grad():
             self.params = [p[rows].contiguous().requires_grad_() for p in self.params]
             self.m = [m[rows].contiguous() for m in self.m]
@@ -247,16 +293,20 @@ def fit_batched(
     samples: Samples | None = None,
     progress: bool | str = False,
     on_epoch: Callable[[int, torch.Tensor], None] | None = None,
+    device: torch.device | str = "cpu",
+    cuda_graphs: bool = True,
 ) -> list[Outcome]:
     """Fit one network per table, all in one pass; `inits` gives each one's initial weights.
 
     `samples` may be passed in to share one draw across several calls (it must match
     `recipe.n_samples`, `features` and `sample_seed`); `on_epoch(epoch, losses)` sees the
-    epoch losses of the still active materials.
+    epoch losses (on the CPU) of the still active materials. `device`: where to compute;
+    the outcomes' weights live there.
     """
     if len(tables) != len(inits) or not tables:
         raise ValueError(f"fit_batched needs one initial weight dict per table, got {len(inits)} for {len(tables)}")
-    scale = torch.ones(3) if output_scale is None else output_scale.to(torch.float32)
+    device = torch.device(device)
+    scale = torch.ones(3) if output_scale is None else output_scale.detach().cpu().to(torch.float32)
     names = list(inits[0])
     hidden = net.hidden_of(inits[0])
     for w in inits:
@@ -266,7 +316,8 @@ def fit_batched(
         samples = draw_samples(recipe.n_samples, features, sample_seed, recipe.sampling)
     if recipe.loss == "l1_or_l2":
         runs = [fit_batched(tables, inits, features=features, recipe=replace(recipe, loss=loss), output_scale=output_scale,
-                            sample_seed=sample_seed, samples=samples, progress=progress, on_epoch=on_epoch)
+                            sample_seed=sample_seed, samples=samples, progress=progress, on_epoch=on_epoch,
+                            device=device, cuda_graphs=cuda_graphs)
                 for loss in ("l1", "l2")]
         return [min(pair, key=lambda o: o.loss) for pair in zip(*runs)]  # ties: the L1 fit
     n_samples = samples.x.shape[0]
@@ -281,40 +332,23 @@ def fit_batched(
     cos = samples.cos_i.clamp(COS_MIN, 1 - 2.0**-24)
     log_c, log_1mc = torch.log(cos), torch.log1p(-cos)
 
-    stack = _Stack(inits, names)
+    stack = _Stack(inits, names, device)
+    steps_per_epoch = math.ceil(n_samples / recipe.batch_size)
+    total_steps = recipe.epochs * steps_per_epoch
+    if device.type == "cpu" and not _DEVICE_PATH_ON_CPU:
+        epochs = _CpuEpochs(stack, recipe, samples.x, log_c, log_1mc, y, mask, total_steps)
+    else:
+        epochs = _DeviceEpochs(stack, recipe, samples.x, log_c, log_1mc, y, mask, total_steps, device, cuda_graphs)
     active = torch.arange(len(tables))
     outcomes: list[Outcome | None] = [None] * len(tables)
     best = torch.full((len(tables),), math.inf)
     since_best = torch.zeros(len(tables), dtype=torch.long)
     last_loss = torch.full((len(tables),), math.inf)
-    steps_per_epoch = math.ceil(n_samples / recipe.batch_size)
-    total_steps = recipe.epochs * steps_per_epoch
     order = torch.Generator().manual_seed(sample_seed + 1)
-    step = 0
     bar = tqdm(range(recipe.epochs), desc=progress if isinstance(progress, str) else "nbrdf fit", unit="epoch",
                disable=not progress, leave=False, dynamic_ncols=True)
     for epoch in bar:
-        perm = torch.randperm(n_samples, generator=order)
-        x_e, c_e, d_e = samples.x[perm], log_c[perm], log_1mc[perm]
-        y_e, m_e = y.index_select(0, perm), mask.index_select(0, perm)
-        epoch_sum = torch.zeros(len(active))
-        epoch_count = torch.zeros(len(active))
-        for start in range(0, n_samples, recipe.batch_size):
-            sl = slice(start, start + recipe.batch_size)
-            z = stack.forward(x_e[sl])  # (M, B, 3)
-            pred = predict_log(z, c_e[sl, None], d_e[sl, None], recipe.output)
-            m = m_e[sl].T.contiguous()  # (M, B)
-            diff = pred - y_e[sl].transpose(0, 1).contiguous()
-            err = diff.abs().mean(dim=2) * m  # (M, B)
-            count = m.sum(dim=1)
-            descended = diff.square().mean(dim=2) * m if recipe.loss == "l2" else err
-            per_material = descended.sum(dim=1) / count.clamp(min=1)
-            per_material.sum().backward()
-            stack.adam_step(learning_rate(recipe, step, total_steps))
-            step += 1
-            epoch_sum += err.detach().sum(dim=1)
-            epoch_count += count
-        losses = epoch_sum / epoch_count.clamp(min=1)
+        losses = epochs.run(torch.randperm(n_samples, generator=order))
         last_loss[active] = losses
         if on_epoch is not None:
             on_epoch(epoch, losses)
@@ -336,12 +370,144 @@ def fit_batched(
             rows = torch.nonzero(~done).flatten()
             stack.keep(rows)
             active = active[rows]
-            y, mask = y[:, rows], mask[:, rows]
+            epochs.keep(rows)
         bar.set_postfix(active=len(active), median_loss=f"{float(losses.median()):.4g}")
         if len(active) == 0:
             break
     bar.close()
     return [o for o in outcomes if o is not None]
+
+
+class _CpuEpochs:
+    """The epochs of a fit on the CPU: eager steps with host scalars."""
+
+    def __init__(self, stack, recipe, x, log_c, log_1mc, y, mask, total_steps):
+        self.stack, self.recipe, self.total = stack, recipe, total_steps
+        self.x, self.log_c, self.log_1mc, self.y, self.mask = x, log_c, log_1mc, y, mask
+        self.step = 0
+
+    def keep(self, rows: torch.Tensor) -> None:
+        self.y, self.mask = self.y[:, rows], self.mask[:, rows]
+
+    def run(self, perm: torch.Tensor) -> torch.Tensor:
+        """One epoch over the samples in `perm`'s order; each active material's mean L1 loss."""
+        stack, recipe = self.stack, self.recipe
+        x_e, c_e, d_e = self.x[perm], self.log_c[perm], self.log_1mc[perm]
+        y_e, m_e = self.y.index_select(0, perm), self.mask.index_select(0, perm)
+        epoch_sum = torch.zeros(self.y.shape[1])
+        epoch_count = torch.zeros(self.y.shape[1])
+        for start in range(0, perm.shape[0], recipe.batch_size):
+            sl = slice(start, start + recipe.batch_size)
+            z = stack.forward(x_e[sl])  # (M, B, 3)
+            pred = predict_log(z, c_e[sl, None], d_e[sl, None], recipe.output)
+            m = m_e[sl].T.contiguous()  # (M, B)
+            diff = pred - y_e[sl].transpose(0, 1).contiguous()
+            err = diff.abs().mean(dim=2) * m  # (M, B)
+            count = m.sum(dim=1)
+            descended = diff.square().mean(dim=2) * m if recipe.loss == "l2" else err
+            per_material = descended.sum(dim=1) / count.clamp(min=1)
+            per_material.sum().backward()
+            stack.adam_step(learning_rate(recipe, self.step, self.total))
+            self.step += 1
+            epoch_sum += err.detach().sum(dim=1)
+            epoch_count += count
+        return epoch_sum / epoch_count.clamp(min=1)
+
+
+class _DeviceEpochs:
+    """The epochs of a fit on a GPU: data moved once, steps that never wait for the host,
+    one CUDA graph per minibatch shape (see the module docstring)."""
+
+    def __init__(self, stack, recipe, x, log_c, log_1mc, y, mask, total_steps, device, cuda_graphs: bool):
+        self.stack, self.recipe, self.device = stack, recipe, device
+        self.x, self.log_c, self.log_1mc = x.to(device), log_c.to(device), log_1mc.to(device)
+        self.y, self.mask = y.to(device), mask.to(device)
+        self.schedule = adam_schedule(recipe, total_steps, device)
+        self.hyper = torch.empty(2, device=device)
+        self.acc = torch.zeros(2, y.shape[1], device=device)  # the epoch's summed L1 errors and counts
+        self.step = 0
+        self.use_graphs = cuda_graphs and device.type == "cuda"
+        self.graphs: dict[int, tuple] = {}  # minibatch size -> (graph, its index buffer)
+
+    def keep(self, rows: torch.Tensor) -> None:
+        rows = rows.to(self.device)
+        self.y, self.mask = self.y[:, rows], self.mask[:, rows]
+        self.acc = torch.zeros(2, self.y.shape[1], device=self.device)
+        self.graphs.clear()  # the stack's tensors are new: capture again
+
+    def _step(self, idx: torch.Tensor) -> None:
+        recipe = self.recipe
+        z = self.stack.forward(self.x.index_select(0, idx))  # (M, B, 3)
+        pred = predict_log(z, self.log_c.index_select(0, idx)[:, None], self.log_1mc.index_select(0, idx)[:, None],
+                           recipe.output)
+        m = self.mask.index_select(0, idx).T.contiguous()  # (M, B)
+        diff = pred - self.y.index_select(0, idx).transpose(0, 1).contiguous()
+        err = diff.abs().mean(dim=2) * m
+        count = m.sum(dim=1)
+        descended = diff.square().mean(dim=2) * m if recipe.loss == "l2" else err
+        per_material = descended.sum(dim=1) / count.clamp(min=1)
+        per_material.sum().backward()
+        self.stack.adam_step_scheduled(self.hyper)
+        with torch.no_grad():
+            self.acc[0].add_(err.detach().sum(dim=1))
+            self.acc[1].add_(count)
+
+    def _graph(self, size: int):
+        """The captured step for minibatches of `size` (None where capture is unavailable)."""
+        if size not in self.graphs:
+            self.graphs[size] = self._capture(size) if self.use_graphs else None
+        return self.graphs[size]
+
+    def _capture(self, size: int):
+        idx = torch.zeros(size, dtype=torch.long, device=self.device)
+        state = self.stack.state()
+        saved = [t.detach().clone() for t in (*state, self.acc)]
+        try:
+            side = torch.cuda.Stream(self.device)
+            side.wait_stream(torch.cuda.current_stream(self.device))
+            with torch.cuda.stream(side):  # warm-up (cuBLAS handles, autograd) off the capture
+                for _ in range(2):
+                    self._step(idx)
+            torch.cuda.current_stream(self.device).wait_stream(side)
+            with torch.no_grad():  # the warm-up steps were not training: undo them
+                for t, v in zip((*state, self.acc), saved):
+                    t.copy_(v)
+            for p in self.stack.params:
+                p.grad = None
+            graph = torch.cuda.CUDAGraph()
+            with torch.cuda.graph(graph):
+                self._step(idx)
+            with torch.no_grad():  # capturing ran the kernels' allocation, not their effect; restore anyway
+                for t, v in zip((*state, self.acc), saved):
+                    t.copy_(v)
+            return graph, idx
+        except Exception as exc:  # a driver or torch without graph support: eager steps, same arithmetic
+            log.warning("nbrdf fit: CUDA graph capture failed (%s); stepping eagerly", exc)
+            self.use_graphs = False
+            with torch.no_grad():
+                for t, v in zip((*state, self.acc), saved):
+                    t.copy_(v)
+            for p in self.stack.params:
+                p.grad = None
+            return None
+
+    def run(self, perm: torch.Tensor) -> torch.Tensor:
+        perm = perm.to(self.device)
+        self.acc.zero_()
+        batch = self.recipe.batch_size
+        for start in range(0, perm.shape[0], batch):
+            idx = perm[start:start + batch]
+            self.hyper.copy_(self.schedule[self.step])
+            captured = self._graph(idx.shape[0])
+            if captured is None:
+                self._step(idx)
+            else:
+                graph, buffer = captured
+                buffer.copy_(idx)
+                graph.replay()
+            self.step += 1
+        losses = self.acc[0] / self.acc[1].clamp(min=1)
+        return losses.cpu()
 
 
 def with_overrides(recipe: Recipe, **changes) -> Recipe:

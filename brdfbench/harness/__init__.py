@@ -91,6 +91,7 @@ class HarnessContext:
     config_hash: str = ""  # the job's configuration: artifacts (`brdfbench.artifacts`) are indexed by it
     dataset: Any = None  # the job's dataset (`brdfbench.data.Dataset`), already subset
     label: str = ""  # the job's label
+    device: Any = None  # the job's torch device for the harness's own work (None: the CPU)
 
 
 class Harness(ABC):
@@ -105,6 +106,12 @@ class Harness(ABC):
     domains: ClassVar[tuple[str, ...]] = ()
     #: True: needs a rendered scene; False: needs scene=brdf_space.
     rendered: ClassVar[bool] = False
+    #: True: the harness computes its own figures (distances, features) on the job's device,
+    #: so they count as measured there even where the plugin runs on the CPU.
+    uses_device: ClassVar[bool] = False
+    #: True: `measure` takes models where they were fitted (the job's device); False: the
+    #: pipeline moves a model fitted on a GPU to the CPU before measuring it.
+    measures_on_device: ClassVar[bool] = False
 
     @classmethod
     def validate(cls, config: HarnessConfig, scene, metric_specs: list) -> None:

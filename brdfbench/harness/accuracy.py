@@ -156,8 +156,11 @@ def _score(model: Representation, pairs: _Pairs, mask: torch.Tensor, ref: torch.
     index = mask.nonzero().squeeze(1)
     ref = _rows(ref, index)
     cos, batches = pairs.select(index)
+    device = model.device
     for s, a, b in batches:
-        pred = model.eval(a, b)
+        # a model on a GPU evaluates there (its derived data made there too); scores are
+        # accumulated on the host, in the same order either way
+        pred = model.eval(a, b) if device.type == "cpu" else model.eval(a.to(device), b.to(device)).cpu()
         for m in metrics:
             m.update(pred, ref[s], cos[s])
 

@@ -24,14 +24,18 @@ class AccuracyConfig(HarnessConfig):
     n_random: int = field(default=2**20, metadata={"min": 1})  # random (ωi, ωo) pairs of the HDR metrics
     throughput_batch: int = field(default=2**16, metadata={"min": 1})  # pairs per timed evaluation batch
     lobes: bool = True  # save in-plane lobe slices of each cell under <results>/artifacts (not hashed)
+    # pairs per timed batch for a model on a GPU, where 2^16 pairs measure kernel launches
+    # rather than arithmetic (not hashed: the device is run control; rows record it)
+    gpu_throughput_batch: int = field(default=2**22, metadata={"min": 1})
 
-    RUN_CONTROL: ClassVar[tuple[str, ...]] = (*HarnessConfig.RUN_CONTROL, "lobes")
+    RUN_CONTROL: ClassVar[tuple[str, ...]] = (*HarnessConfig.RUN_CONTROL, "lobes", "gpu_throughput_batch")
 
 
 class AccuracyHarness(Harness):
     name = "accuracy"
     Config = AccuracyConfig
     domains = ("merl_grid", "random_pairs")
+    measures_on_device = True
 
     def __init__(self, config, context):
         super().__init__(config, context)
@@ -47,7 +51,8 @@ class AccuracyHarness(Harness):
         c, ctx = self.config, self.context
         dtype = getattr(torch, c.dtype)
         out = evaluate_accuracy(model, material, ctx.metric_specs, n_random=c.n_random, seed=ctx.seed, dtype=dtype)
-        out.append(evaluation_throughput(model, batch=c.throughput_batch, seed=ctx.seed, dtype=dtype))
+        batch = c.throughput_batch if model.device.type == "cpu" else c.gpu_throughput_batch
+        out.append(evaluation_throughput(model, batch=batch, seed=ctx.seed, dtype=dtype))
         width = lobes.table_half_width(material.table)
         if width is not None:
             out.append(Measurement(TARGET_HALF_WIDTH, width, "rad", False))
@@ -57,10 +62,12 @@ class AccuracyHarness(Harness):
 
     def _save_lobes(self, model, material, label: str, dtype) -> None:
         from .. import artifacts
+        from ..device import on_host
         from . import lobes
 
         ctx = self.context
         path = artifacts.index_path(ctx.results_dir, ctx.config_hash, material.name).with_suffix(".lobes.json")
-        lobes.write(path, lobes.slices(model.eval, dtype), lobes.slices(material.table.lookup), label, material.name)
+        lobes.write(path, lobes.slices(on_host(model.eval, model.device), dtype), lobes.slices(material.table.lookup),
+                    label, material.name)
         artifacts.record(ctx.results_dir, ctx.config_hash, material.name, "lobes", path,
                          theta_i_deg=list(lobes.THETA_I_DEG))

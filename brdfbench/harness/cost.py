@@ -1,7 +1,8 @@
 """What a representation costs: evaluation throughput and model size.
 
-Throughput is the median over timed batches after one warm-up batch, measured on this
-machine's CPU with torch's current thread count: at least three batches, then more until
+Throughput is the median over timed batches after one warm-up batch, measured where the
+model lives (this machine's CPU with torch's current thread count, or its GPU, waiting for
+the device to finish each batch): at least three batches, then more until
 `min_time_s` has passed or `max_repeats` were timed. Every cell pays that time, so
 `min_time_s` is kept short; the median of three or more is robust to a stray slow batch.
 """
@@ -13,6 +14,7 @@ import time
 
 import torch
 
+from ..device import synchronize
 from ..protocol import Representation
 from . import Measurement, directions
 
@@ -21,13 +23,16 @@ def evaluation_throughput(
     model: Representation, *, batch: int = 2**16, min_time_s: float = 0.03, max_repeats: int = 20,
     seed: int = 0, dtype: torch.dtype = torch.float32,
 ) -> Measurement:
-    wi, wo = (t.to(dtype) for t in directions.random_pairs(batch, seed + 1, torch.float64))
+    device = model.device
+    wi, wo = (t.to(device=device, dtype=dtype) for t in directions.random_pairs(batch, seed + 1, torch.float64))
     model.eval(wi, wo)  # warm-up
+    synchronize(device)
     times: list[float] = []
     start = time.perf_counter()
     while len(times) < max_repeats and (len(times) < 3 or time.perf_counter() - start < min_time_s):
         t0 = time.perf_counter()
         model.eval(wi, wo)
+        synchronize(device)
         times.append(time.perf_counter() - t0)
     return Measurement("evals_per_s", batch / statistics.median(times), "evals/s", True)
 

@@ -133,7 +133,7 @@ def to_value(z: torch.Tensor, output_scale: torch.Tensor | None = None) -> torch
     """BRDF values from z: expm1(min(z, MAX_LOG_VALUE)) clamped at 0 (expm1: no cancellation
     near 0; the clamp keeps fp32 finite), times the channel scales."""
     out = torch.clamp(torch.expm1(torch.clamp(z, max=MAX_LOG_VALUE)), min=0.0)
-    return out if output_scale is None else out * output_scale.to(z.dtype)
+    return out if output_scale is None else out * output_scale.to(device=z.device, dtype=z.dtype)
 
 
 def forward(weights: Mapping, x: torch.Tensor, output_scale: torch.Tensor | None = None) -> torch.Tensor:

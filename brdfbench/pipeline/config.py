@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import registry
+from ..device import check_spec
 from ..errors import ConfigError
 from ..harness import HarnessConfig, check_value
 
@@ -63,6 +64,7 @@ class RunConfig:
     isolate: bool = True  # cells in a worker process with a hard time limit (False: in-process, for debugging)
     progress: str = field(default="auto", metadata={"choices": PROGRESS})
     launcher: str = "basic"  # the Hydra launcher that started the job (recorded with every figure)
+    device: str = "auto"  # where torch work runs: auto | cpu | cuda | cuda:N (see brdfbench.device)
     job: str = ""  # the job's number in a sweep, for progress lines
     # a generation job's generator (harness=generation); "" for jobs that measure representations
     generator: str = ""
@@ -97,6 +99,8 @@ class RunConfig:
                 value = Path(value)
                 if value.exists() and not value.is_dir():
                     raise ConfigError(f"results_dir={str(value)!r} exists and is not a folder")
+            elif f.name == "device":
+                value = check_spec(value)
             elif f.name == "harness":
                 if not isinstance(value, HarnessConfig):
                     raise ConfigError(f"harness must be a harness config, got {type(value).__name__}")

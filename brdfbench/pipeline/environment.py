@@ -1,7 +1,7 @@
 """Where a figure was measured, so cost figures can be compared honestly.
 
-The environment (host, CPU model, usable cores, torch threads, launcher, platform) is
-stored once per distinct value. Concurrency is counted per cell: every worker holds a
+The environment (host, CPU model, usable cores, torch threads, launcher, platform, and the
+device that computed the figures) is stored once per distinct value. Concurrency is counted per cell: every worker holds a
 marker file named by its pid in a host-wide folder while it runs a task, and a cell
 records how many live markers there were (itself included), whichever launcher or shell
 started the other jobs.
@@ -40,9 +40,13 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def environment(threads: int, launcher: str) -> Environment:
+def environment(threads: int, launcher: str, device: tuple[str, str] = ("cpu", "cpu")) -> Environment:
+    """This host's environment; `device` is (name, description) of where the figures were
+    computed (`brdfbench.device.name` and `describe`)."""
     fields = {"host": socket.gethostname(), "cpu_model": cpu_model(), "cpu_count": usable_cores(), "threads": int(threads),
               "launcher": launcher, "platform": f"{platform.system()} {platform.machine()} Python {platform.python_version()}"}
+    if device[0] != "cpu":  # a CPU environment keeps the id it had before devices were recorded
+        fields.update(device=device[0], device_detail=device[1])
     return Environment(env_id=config_hash(fields), **fields)
 
 

@@ -22,6 +22,7 @@ from typing import Any, Callable
 
 import torch
 
+from .. import device as devices
 from .. import modelio
 from ..errors import BrdfbenchError, RenderError
 from ..harness import HarnessContext, Measurement
@@ -44,22 +45,43 @@ class JobState:
     checked: Checked
     harness: Any
     fitter: Any = None  # one per job: it may carry a shared initialisation across batches
+    device: torch.device = devices.CPU  # where the job's plugin computes
+
+    @property
+    def recorded_device(self) -> tuple[str, str]:
+        """(name, description) of the device the job's figures are computed on, for its rows."""
+        used = self.device
+        if used.type == "cpu" and self.checked.harness_cls.uses_device and self.harness.context.device is not None:
+            used = self.harness.context.device
+        return devices.name(used), devices.describe(used)
+
+    def place(self, model):
+        """`model` moved to the job's device (where its class declares it)."""
+        return model if self.device.type == "cpu" else model.to(self.device)
 
 
 def job_state(job: RunConfig) -> JobState:
     checked = check(job)
+    asked = devices.resolve(job.device)
     context = HarnessContext(
         scene=checked.scene, metric_specs=checked.metric_specs, seed=job.seed, results_dir=job.results_dir,
         dataset_fingerprint=checked.dataset.fingerprint, representation=job.plugin,
         representation_params=job.plugin_params, scene_name=job.scene, scene_params=job.scene_params,
         config_hash=config_hash(hashed_config(job, checked.harness_cls)), dataset=checked.dataset, label=job.label,
+        device=asked,
     )
-    return JobState(checked, checked.harness_cls(job.harness, context))
+    return JobState(checked, checked.harness_cls(job.harness, context), device=devices.for_plugin(asked, checked.cls))
 
 
-def _fault(exc: Exception) -> str:
+def _fault(exc: Exception, device: torch.device = devices.CPU) -> str:
     """The failure message of a plugin's exception; bad data (any other BrdfbenchError) is
-    re-raised, so that it stops the job naming the file."""
+    re-raised, so that it stops the job naming the file. A device out of memory names the
+    device and what was asked for, and frees the cached blocks for the next cell."""
+    if devices.out_of_memory(exc):
+        message = devices.memory_message(exc, device)
+        if device.type == "cuda":
+            torch.cuda.empty_cache()
+        return message
     if isinstance(exc, (RenderError, NonFinite)):
         return str(exc)
     if isinstance(exc, BrdfbenchError):
@@ -82,20 +104,20 @@ def execute(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency
         emit(("phase", _limit(job), what, what))
         try:
             torch.manual_seed(job.seed)
-            trained = spec.create(**job.representation_params)
+            trained = state.place(spec.create(**job.representation_params))
             reset_peak()
             t0 = time.perf_counter()
             trained.train((dataset.load(n) for n in task.train), seed=job.seed)
             extra = [Measurement("train_time", time.perf_counter() - t0, "s", False),
                      *_memory("peak_rss_train")]
         except Exception as exc:  # a failed training fails every cell of its fold, and the sweep goes on
-            message = "training failed: " + _fault(exc)
+            message = "training failed: " + _fault(exc, state.device)
             log.warning("%s: %s", job.label, message)
             return _fail_all(emit, dataset, task.materials, message)
         groups = [(name,) for name in task.materials]
     else:
         if state.fitter is None:
-            state.fitter = spec.create(**job.representation_params)
+            state.fitter = state.place(spec.create(**job.representation_params))
         groups = [task.materials]
     for chunk in groups:
         _fit_and_measure(job, chunk, state, trained, extra, emit, concurrency)
@@ -118,18 +140,21 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
             # the fit's own bar only where the job shows a bar: in `lines` mode bars would garble the log
             progress = f"fitting {len(chunk)} materials" if len(chunk) > 1 and progress_mode(job) == "bar" else False
             models = state.fitter.fit_many(materials, seed=job.seed, progress=progress)
+        devices.synchronize(state.device)  # queued device work belongs to the fit's time
         fit_s = (time.perf_counter() - t0) / len(chunk)  # amortised over the batch
         fit_memory = _memory("peak_rss_fit")
         if len(models) != len(chunk):
             raise RuntimeError(f"fit_many returned {len(models)} models for {len(chunk)} materials")
     except Exception as exc:  # a failed fit fails every cell of its batch, and the sweep goes on
-        message = _fault(exc)
+        message = _fault(exc, state.device)
         log.warning("%s failed to fit %s: %s", job.label, ", ".join(chunk), message)
         return _fail_all(emit, dataset, chunk, message)
     fit_extra = [Measurement("fit_batch", float(len(chunk)), "materials", False)] if len(chunk) > 1 else []
     for material, model in zip(materials, models):
         emit(("phase", _limit(job), f"{job.label} on {material.name}", None))
         try:
+            if model.device.type != "cpu" and not state.checked.harness_cls.measures_on_device:
+                model = model.to(devices.CPU)
             reset_peak()
             measurements = state.harness.measure(model, material, job.label)
             measurements += _memory("peak_rss_eval")
@@ -145,7 +170,7 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
                 modelio.save(model, job.representation,
                              job.results_dir / "models" / dataset.fingerprint / job.label / f"{material.name}.safetensors")
         except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
-            message = _fault(exc)
+            message = _fault(exc, state.device)
             log.warning("%s failed on %s: %s", job.label, material.name, message)
             emit(("cell", material.name, material.category, [], "failed", message, busy))
         else:
@@ -156,7 +181,7 @@ def _execute_sets(job: RunConfig, task: Task, state: JobState, emit: Emit, concu
     """A set-scope task: train the job's plugin once on `task.train`, then measure each set."""
     harness = state.harness
     try:
-        model = state.checked.spec.create(**job.plugin_params)
+        model = state.place(state.checked.spec.create(**job.plugin_params))
         what = f"preparing the training data of {job.label} ({len(task.train)} materials)"
         emit(("phase", _limit(job), what, what))
         harness.prepare(model, task.train)
@@ -167,12 +192,13 @@ def _execute_sets(job: RunConfig, task: Task, state: JobState, emit: Emit, concu
         t0 = time.perf_counter()
         model = harness.train(model, task.train, job.seed,
                               progress=f"training {job.label}" if progress_mode(job) == "bar" else False)
+        devices.synchronize(state.device)
         extra = [Measurement("train_time", time.perf_counter() - t0, "s", False), *_memory("peak_rss_train")]
         if job.save_models:
             modelio.save_generator(model, job.plugin, job.results_dir / "models" / state.checked.dataset.fingerprint
                                    / job.label / "generator.safetensors")
     except Exception as exc:  # a failed training fails every set of the task, and the sweep goes on
-        message = "training failed: " + _fault(exc)
+        message = "training failed: " + _fault(exc, state.device)
         log.warning("%s: %s", job.label, message)
         for name in task.materials:
             emit(("cell", name, "set", [], "failed", message, 1))
@@ -185,7 +211,7 @@ def _execute_sets(job: RunConfig, task: Task, state: JobState, emit: Emit, concu
             measurements = harness.measure_set(model, name) + _memory("peak_rss_eval") + extra
             _check_finite(measurements, name)
         except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
-            message = _fault(exc)
+            message = _fault(exc, state.device)
             log.warning("%s failed on %s: %s", job.label, name, message)
             emit(("cell", name, "set", [], "failed", message, busy))
         else:

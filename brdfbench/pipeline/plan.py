@@ -15,6 +15,7 @@ from typing import Any, Callable
 
 import torch
 
+from .. import device as devices
 from .. import registry
 from ..errors import ConfigError
 from ..provenance import config_hash
@@ -170,7 +171,11 @@ def make_plan(job: RunConfig, checked: Checked, done_cells: Callable[[str, str, 
     else:
         pending = tuple(m for m in dataset.materials if m not in done)
         skipped = len(dataset.materials) - len(pending)
-        batch = max(1, int(checked.probe.fit_batch_size))
+        probe = checked.probe
+        placed = devices.for_plugin(devices.resolve(job.device), checked.cls)
+        if placed.type != "cpu":  # a plugin may fit more materials at once on a GPU
+            probe.to(placed)
+        batch = max(1, int(probe.fit_batch_size))
         tasks = [Task(pending[i:i + batch]) for i in range(0, len(pending), batch)]
     return Plan(job, checked, chash, params, registry.version(job.plugin_group, job.plugin),
                 checked.harness_cls.columns(job.harness, checked.scene), tasks, skipped)

@@ -78,6 +78,7 @@ class Worker:
         self.process = None
         self.conn = None
         self.threads = 0
+        self.device = ("cpu", "cpu")  # (name, description) of the device the current job computes on
 
     def _start(self) -> None:
         # a spawned child inherits the parent's start-method name: under joblib's loky workers
@@ -131,7 +132,8 @@ class Worker:
         return self
 
     def run(self, job: RunConfig, task: Task, on_cell: Callable[[tuple], None],
-            on_note: Callable[[str], None] = lambda note: None) -> Outcome:
+            on_note: Callable[[str], None] = lambda note: None,
+            on_device: Callable[[tuple[str, str]], None] = lambda device: None) -> Outcome:
         self.ensure()
         envelope = (dict(os.environ), os.getcwd(), registry.snapshot(), job, task)
         self.conn.send(envelope)
@@ -167,6 +169,9 @@ class Worker:
                 on_cell(msg[1:])
             elif kind == "threads":
                 self.threads = msg[1]
+            elif kind == "device":  # sent before the job's first cell
+                self.device = msg[1]
+                on_device(msg[1])
             elif kind == "fatal":  # raised once the worker has finished the task (its "done" follows)
                 fatal = msg[1]
             elif kind == "done":
@@ -255,6 +260,7 @@ def _worker_main(conn) -> None:
                 if key not in states:
                     states.clear()  # one job's state at a time: what it built can be large
                     states[key] = job_state(job)
+                conn.send(("device", states[key].recorded_device))
                 execute(job, task, states[key], conn.send, marker.count)
         except BrdfbenchError as exc:
             conn.send(("fatal", _portable(exc)))

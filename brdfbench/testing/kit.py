@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import tempfile
 import traceback
+import unittest
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -169,6 +170,106 @@ def check_save_load_roundtrip(ctx: Context) -> None:
         assert torch.equal(a, b), f"loaded model differs by up to {float((a - b).abs().max()):.3g} ({dtype})"
 
 
+#: Device types a plugin may declare (torch.device types brdfbench can resolve or may later).
+KNOWN_DEVICES = frozenset({"cpu", "cuda"})
+#: A fit on a GPU may differ from the CPU fit (other summation orders); its accuracy on the
+#: reference material must agree with the CPU fit's within this share (or DEVICE_FIT_ABS).
+DEVICE_FIT_REL, DEVICE_FIT_ABS = 0.05, 2e-3
+#: The same fitted model evaluated on a GPU and on the CPU: relative agreement.
+DEVICE_EVAL_RTOL = 1e-5
+
+
+class NoDevice(unittest.SkipTest):
+    """A device check that cannot run here (no such device, or the plugin declares none):
+    reported as skipped by the kit and by pytest."""
+
+
+def _gpu() -> torch.device:
+    from ..device import cuda_count
+
+    if not cuda_count():
+        raise NoDevice("no CUDA device here: the GPU checks run where torch sees one")
+    return torch.device("cuda", 0)
+
+
+def _log_error(model: Representation, wi: torch.Tensor, wo: torch.Tensor, ref: torch.Tensor) -> float:
+    """Mean |log(1 + f cos θi) − log(1 + ref cos θi)| of a model at host pairs."""
+    device = model.device
+    f = model.eval(wi.to(device), wo.to(device)).cpu()
+    cos = wi[:, 2:3]
+    return float((torch.log1p(f * cos) - torch.log1p(ref * cos)).abs().mean())
+
+
+@check()
+def check_devices_declared(ctx: Context) -> None:
+    """`devices` names known device types, the CPU among them; `to` refuses an undeclared
+    type before any work, and `to("cpu")` of a fitted CPU model changes nothing."""
+    cls = ctx.spec.load()
+    declared = cls.devices
+    assert isinstance(declared, (frozenset, set)) and "cpu" in declared, (
+        f"{cls.__name__}.devices must be a set of device types including 'cpu', got {declared!r}")
+    unknown = set(declared) - KNOWN_DEVICES
+    assert not unknown, f"{cls.__name__}.devices names unknown device type(s) {sorted(unknown)}; known: {sorted(KNOWN_DEVICES)}"
+    model = ctx.spec.create(**ctx.params)
+    assert model.device == torch.device("cpu"), f"a new model must start on the CPU, got {model.device}"
+    if "cuda" not in declared:
+        from ..errors import ConfigError
+
+        try:
+            model.to("cuda:0")
+        except ConfigError:
+            pass
+        else:
+            raise AssertionError(f"{cls.__name__}.to('cuda:0') was accepted but 'cuda' is not in its devices")
+    fitted = ctx.model
+    wi, wo = adversarial_pairs(4096, torch.float64, seed=11)["uniform"]
+    before = fitted.eval(wi, wo)
+    assert fitted.to("cpu") is fitted, "to() must return the model itself"
+    after = fitted.eval(wi, wo)
+    assert torch.equal(before, after), f"to('cpu') changed a CPU model's values by up to {float((before - after).abs().max()):.3g}"
+
+
+@check()
+def check_device_agreement(ctx: Context) -> None:
+    """Where a plugin declares "cuda" (and a GPU is here): the CPU-fitted model moved to the
+    GPU evaluates GPU inputs there, in their dtype, within DEVICE_EVAL_RTOL of its CPU
+    values; a model fitted (and trained) on the GPU scores the reference material as the
+    CPU fit does, within DEVICE_FIT_REL."""
+    cls = ctx.spec.load()
+    if "cuda" not in cls.devices:
+        raise NoDevice(f"{cls.__name__} runs on the CPU only (devices = {sorted(cls.devices)})")
+    gpu = _gpu()
+    cpu_model = ctx.model
+    moved = cls.from_state(dict(cpu_model.params), {k: v.detach().cpu().clone() for k, v in cpu_model.state_dict().items()},
+                           cpu_model.metadata()).to(gpu)
+    assert moved.device.type == "cuda", f"to({gpu}) left the model on {moved.device}"
+    for dtype in DTYPES:
+        wi, wo = adversarial_pairs(20_000, dtype, seed=12)["uniform"]
+        a = cpu_model.eval(wi, wo)
+        b = moved.eval(wi.to(gpu), wo.to(gpu))
+        assert b.device.type == "cuda", f"eval of {gpu} inputs returned values on {b.device}"
+        assert b.dtype == dtype, f"eval on {dtype} ({gpu}) returned {b.dtype}"
+        b = b.cpu()
+        scale = float(a.abs().max()) or 1.0
+        bad = ~torch.isclose(a, b, rtol=DEVICE_EVAL_RTOL, atol=DEVICE_EVAL_RTOL * 1e-3 * scale).all(dim=1)
+        assert not bad.any(), _first_fault(f"GPU evaluation differs from the CPU one ({dtype})", wi, wo, b - a, bad)
+    if "fittable" not in ctx.spec.tags:
+        return
+    model = ctx.spec.create(**ctx.params).to(gpu)
+    if model.needs_training:
+        model.train(training_materials(), seed=0)
+    fitted = model.fit(reference_material(), seed=FIT_SEED)
+    assert fitted.device.type == "cuda", f"a model fitted on {gpu} reports device {fitted.device}"
+    table = reference_material().table
+    wi, wo = adversarial_pairs(50_000, torch.float64, seed=13)["uniform"]
+    ref = table.lookup(wi, wo)
+    keep = (ref >= 0).all(dim=1)
+    wi, wo, ref = wi[keep].float(), wo[keep].float(), ref[keep].float()
+    on_cpu, on_gpu = _log_error(cpu_model, wi, wo, ref), _log_error(fitted, wi, wo, ref)
+    assert abs(on_gpu - on_cpu) <= DEVICE_FIT_REL * on_cpu + DEVICE_FIT_ABS, (
+        f"the GPU fit scores {on_gpu:.4g} (mean log error on the reference material), the CPU fit {on_cpu:.4g}")
+
+
 @check()
 def check_cost_declared(ctx: Context) -> None:
     nbytes = ctx.model.nbytes
@@ -221,7 +322,7 @@ class ConformanceReport:
             lines.append(f"  {outcome:8s} {name}")
             if name in self.details:
                 lines.append("           " + self.details[name].replace("\n", "\n           "))
-        counts = {k: list(self.outcomes.values()).count(k) for k in ("passed", "failed", "xfailed", "xpassed")}
+        counts = {k: list(self.outcomes.values()).count(k) for k in ("passed", "failed", "xfailed", "xpassed", "skipped")}
         lines.append(", ".join(f"{v} {k}" for k, v in counts.items() if v) or "no checks ran")
         return "\n".join(lines)
 
@@ -229,6 +330,9 @@ class ConformanceReport:
         """Run one check and record its outcome; an exception of a `skip` type marks it skipped."""
         try:
             check()
+        except unittest.SkipTest as exc:  # a device the check needs is not here
+            self.outcomes[check.name] = "skipped"
+            self.details[check.name] = str(exc)
         except skip as exc:
             self.outcomes[check.name] = "skipped"
             self.details[check.name] = f"not resolvable: {exc}"
@@ -266,10 +370,11 @@ def representation_checks(spec_or_name, *, params: dict | None = None, n_pairs: 
     `check_params` for what `params` and `full` select."""
     spec = _resolve(spec_or_name)
     ctx = Context(spec, check_params(spec, params, full), n_pairs)
+    on_gpu = "cuda" in getattr(spec.load(), "devices", ())
     return [
         Check(spec.name, name, (lambda fn=fn: fn(ctx)), spec.xfail_checks.get(name))
         for name, (requires, fn) in CHECKS.items()
-        if requires <= spec.tags
+        if requires <= spec.tags and (on_gpu or name != "device_agreement")  # CPU-only plugins: nothing to compare
     ]
 
 

@@ -127,14 +127,15 @@ def _v2(path):
     return rows
 
 
-def test_a_v2_store_migrates_to_v3_and_loses_nothing(tmp_path):
+def test_a_v2_store_migrates_to_the_current_schema_and_loses_nothing(tmp_path):
     path = tmp_path / "brdfbench.sqlite"
     written = _v2(path)
     store = ResultsStore(path)
     con = sqlite3.connect(path)
-    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3
+    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 4
     got = con.execute("SELECT * FROM results ORDER BY rowid").fetchall()
     con.close()
+    assert [(e.env_id, e.device, e.device_detail) for e in store.environments()] == [("e1", "cpu", "cpu")]
     assert [r[:22] for r in got] == written and all(r[22] == "" for r in got)
     assert [c.label for c in store.configs()] == ["merl (mode=nearest)"]
     assert store.done_cells("aaaa", "fp") == {"m1", "m2"}
@@ -146,4 +147,50 @@ def test_a_v2_store_migrates_to_v3_and_loses_nothing(tmp_path):
             for d in ("l1", "l1_log") for c in ("set", "diffuse")]
     assert store.write_cell(cell)
     assert len(store.frame(material="set-0")) == 4
+    ResultsStore(path)  # opening a migrated store again is a no-op
+
+
+def _v3(path):
+    """A v3 store: v2's tables with the `distance` column and v3's unique key."""
+    rows = _v2(path)
+    con = sqlite3.connect(path)
+    con.executescript("""
+ALTER TABLE results RENAME TO results_v2;
+DROP INDEX results_cell;
+CREATE TABLE results (
+    run_id TEXT NOT NULL, config_hash TEXT NOT NULL, dataset TEXT NOT NULL, dataset_fingerprint TEXT NOT NULL,
+    scope TEXT NOT NULL CHECK (scope IN ('material', 'set')), material TEXT NOT NULL, category TEXT NOT NULL,
+    scene TEXT NOT NULL, sampler TEXT NOT NULL, spp INTEGER NOT NULL, metric TEXT NOT NULL, value REAL,
+    unit TEXT NOT NULL, higher_is_better INTEGER NOT NULL, status TEXT NOT NULL CHECK (status IN ('ok', 'failed')),
+    message TEXT NOT NULL, seed INTEGER NOT NULL, package_version TEXT NOT NULL, git_sha TEXT NOT NULL,
+    timestamp REAL NOT NULL, env_id TEXT NOT NULL, concurrent_jobs INTEGER NOT NULL, distance TEXT NOT NULL DEFAULT '',
+    UNIQUE (config_hash, dataset_fingerprint, scope, material, category, metric, distance, spp)
+);
+CREATE INDEX results_cell ON results (config_hash, dataset_fingerprint, scope, material);
+INSERT INTO results SELECT *, '' FROM results_v2;
+DROP TABLE results_v2;
+PRAGMA user_version = 3;
+""")
+    con.commit()
+    con.close()
+    return rows
+
+
+def test_a_v3_store_gains_the_device_columns_and_loses_nothing(tmp_path):
+    path = tmp_path / "brdfbench.sqlite"
+    written = _v3(path)
+    before = sqlite3.connect(path).execute("SELECT * FROM results ORDER BY rowid").fetchall()
+    store = ResultsStore(path)
+    con = sqlite3.connect(path)
+    assert con.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
+    assert con.execute("SELECT * FROM results ORDER BY rowid").fetchall() == before
+    con.close()
+    assert [r[:22] for r in before] == written
+    # every figure of a v3 store was computed on the CPU
+    assert [(e.env_id, e.device, e.device_detail) for e in store.environments()] == [("e1", "cpu", "cpu")]
+    from brdfbench.store_protocol import Environment
+
+    gpu = Environment("e2", "host", "cpu", 16, 16, "basic", "linux", "cuda:0", "NVIDIA H200, 139.8 GiB")
+    store.write_environment(gpu)
+    assert {e.env_id: e.device for e in store.environments()} == {"e1": "cpu", "e2": "cuda:0"}
     ResultsStore(path)  # opening a migrated store again is a no-op
