@@ -14,6 +14,12 @@ draw with no usable sample fails, naming the count.
 
 It lives beside the generators (a harness plugin, as a third party would write one): the
 core pipeline only knows that it scores sets.
+
+Devices: the harness computes its own figures on the job's device (`uses_device`; the
+context's device, None meaning the CPU): the BRDF distance matrices (torch on a GPU, numba
+on the CPU), the image distance matrices and FID's feature extraction. Samples may live on
+the generator's device: they are evaluated on the grid where they live, and moved to the
+CPU to be rendered (Mitsuba renders on the CPU). On the CPU every figure is as before.
 """
 
 from __future__ import annotations
@@ -21,12 +27,13 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 import torch
 
 from brdfbench import merl, registry
+from brdfbench.device import CPU, synchronize
 from brdfbench.errors import ConfigError
 from brdfbench.generator_protocol import SampleSet, TrainingData, seeded_split
 from brdfbench.harness import Harness, HarnessConfig, Measurement
@@ -71,6 +78,7 @@ class GenerationHarness(Harness):
     scope = "set"
     plugin_group = "generators"
     domains = ("set", "image_set")
+    uses_device = True
 
     @classmethod
     def validate(cls, config: GenerationConfig, scene, metric_specs: list) -> None:
@@ -143,6 +151,12 @@ class GenerationHarness(Harness):
             tmp.write_text(json.dumps({"label": ctx.label, "curves": curves}), encoding="utf-8")
         artifacts.record(ctx.results_dir, ctx.config_hash, "training", "curve", path)
 
+    @property
+    def device(self) -> torch.device:
+        """Where the harness computes its distances and features: the job's device (the CPU
+        where the context names none)."""
+        return CPU if self.context.device is None else torch.device(self.context.device)
+
     # -- the reference set, built once per job ------------------------------------------
     @cached_property
     def test_names(self) -> tuple[str, ...]:
@@ -184,6 +198,7 @@ class GenerationHarness(Harness):
         n = c.n_samples or len(self.test_names)
         t0 = time.perf_counter()
         samples = model.sample(n, seed=(self.context.seed * DRAW_SEED_STRIDE + draw) % 2**31)
+        synchronize(getattr(model, "device", CPU))  # a generator on a GPU: its queued sampling is timed too
         sample_s = time.perf_counter() - t0
         values, images, excluded = self._sample_values(samples)
         if not values:
@@ -225,23 +240,26 @@ class GenerationHarness(Harness):
         from .samples import TableSamples
 
         keep, images, excluded = [], [], 0
-        finite = samples.finite
+        finite = samples.finite.cpu()
         for i in range(len(samples)):
             if not bool(finite[i]):
                 log.warning("sample %d has non-finite parameters: excluded", i)
                 excluded += 1
                 continue
+            built = None
             if isinstance(samples, TableSamples):
                 v = samples.table(i).values.astype(np.float32)
             else:
-                v = grid_values(samples[i])
+                built = placed(samples[i], samples.array.device)
+                v = grid_values(built)
             if not np.isfinite(v).all():
                 log.warning("sample %d evaluates to non-finite values: excluded", i)
                 excluded += 1
                 continue
             if self.renders:
                 try:
-                    images.append(render_with(self.simulator, [samples[i]], seed=self.context.seed,
+                    member = on_cpu(samples[i] if built is None else built)
+                    images.append(render_with(self.simulator, [member], seed=self.context.seed,
                                               labels=[f"sample {i}"])[0])
                 except RenderError as exc:
                     log.warning("%s: excluded", exc)
@@ -253,7 +271,7 @@ class GenerationHarness(Harness):
     def _brdf_matrix(self, values: list[np.ndarray], kind: str) -> np.ndarray:
         from brdfbench_metrics.brdf_distances import distance_matrix
 
-        return distance_matrix(self.reference_values + values, None, kind)
+        return distance_matrix(self.reference_values + values, None, kind, device=self.device)
 
     def _image_metrics(self, images: torch.Tensor) -> list[Measurement]:
         """Set metrics over the image distances, and the image-set metrics (FID), of a draw's renders."""
@@ -262,11 +280,13 @@ class GenerationHarness(Harness):
         ref = self.reference_images
         out = []
         for kind in (d for d in self.config.distances if d in IMAGE_DISTANCES):
-            out += self._set_metrics(kind, image_distance_matrix(torch.cat([ref, images]), None, kind))
+            out += self._set_metrics(kind, image_distance_matrix(torch.cat([ref, images]), None, kind,
+                                                                 device=self.device))
         for spec in self.context.metric_specs:
             metric = spec.load()()
             if metric.domain == "image_set":
-                out.append(Measurement(spec.name, float(metric.compute(ref, images)), metric.unit,
+                where = {"device": self.device} if getattr(metric, "uses_device", False) else {}
+                out.append(Measurement(spec.name, float(metric.compute(ref, images, **where)), metric.unit,
                                        spec.higher_is_better))
         return out
 
@@ -285,12 +305,35 @@ class GenerationHarness(Harness):
         return out
 
 
-def grid_values(model, chunk: int = 1 << 18) -> np.ndarray:
-    """A representation evaluated (fp64) at every MERL cell centre: float32 (3, 90, 90, 180)."""
+def placed(model, where: torch.device):
+    """A sample built from parameters on `where` (a sample set's array), consistent about its
+    device: one whose `device` reads the CPU although its parameters lie on a GPU (a plugin
+    that builds from device tensors without `to`) is moved where its class runs, that GPU if
+    it declares it, else the CPU. Anything else is returned as it is."""
+    if where.type == "cpu" or getattr(model, "device", CPU).type != "cpu" or not hasattr(model, "to"):
+        return model
+    return model.to(where if where.type in getattr(model, "devices", ()) else CPU)
+
+
+def on_cpu(model):
+    """`model` on the CPU, where renders are made (Mitsuba): moved there if it lives on a GPU."""
+    return model if getattr(model, "device", CPU).type == "cpu" else model.to(CPU)
+
+
+@lru_cache(maxsize=2)
+def _grid_directions_on(device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """The fp64 grid directions on `device` (moved once per device; never modify in place)."""
     wi, wo = merl.grid_directions(torch.float64)
+    return (wi, wo) if device.type == "cpu" else (wi.to(device), wo.to(device))
+
+
+def grid_values(model, chunk: int = 1 << 18) -> np.ndarray:
+    """A representation evaluated (fp64) at every MERL cell centre, on its own device:
+    float32 (3, 90, 90, 180) on the host."""
+    wi, wo = _grid_directions_on(getattr(model, "device", CPU))
     out = np.empty((3, merl.N_CELLS), dtype=np.float32)
     with torch.no_grad():
         for start in range(0, merl.N_CELLS, chunk):
             s = slice(start, start + chunk)
-            out[:, s] = model.eval(wi[s], wo[s]).T.numpy()
+            out[:, s] = model.eval(wi[s], wo[s]).T.cpu().numpy()
     return out.reshape(3, *merl.SHAPE)

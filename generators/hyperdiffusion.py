@@ -13,6 +13,19 @@ tokens of 45 weights plus the context token, d_model 128, 4 pre-norm blocks of 4
 (1.0 M parameters), AdamW with batch 128, lr 5e-4 → 5e-6 (warm-up, cosine), EMA 0.999, 300
 epochs (5 700 steps on a 2 400-material NeuMERL), 50 DDIM steps. Chunks rather than layers:
 "layer" tokens make 3 tokens of 147, 462 and 66 values, too few for attention to matter.
+`conf/generator/hyperdiffusion_paper.yaml` is the published size (12 blocks of width 768, 12
+heads, the vector as one token: 87.3 M parameters; batch 512, 700 epochs). It is meant for a
+GPU: with `max_cpu_hours` set (that config sets 2) a CPU fit whose estimated time
+(`training_estimate`: parameters × tokens × steps at CPU_FLOPS) exceeds it is refused before
+any work, naming the setting.
+
+Devices: the generator runs on "cpu" and "cuda" (`to`). It is initialised on the CPU from the
+seed's generator and moved; the standardisation and the prior are fitted on the CPU. Every
+random number (permutations, timesteps, noise, condition dropout; the sampling draws) comes
+from a CPU generator in the same order on every device, an epoch's training draws moved
+to the device at once, and the epoch's loss is read once per epoch: on the CPU that is the
+arithmetic of drawing at each step, bit for bit; on a GPU the same seed draws the same
+numbers and the sums round differently.
 
 Two departures from the papers' code, both deliberate:
 
@@ -64,6 +77,9 @@ SAMPLE_BATCH = 1024
 STD_FLOOR = 1e-3
 #: Eigenvalues of the within-class covariance kept in the matched prior (relative to the largest).
 PRIOR_EIG_FLOOR = 1e-6
+#: The CPU training rate `max_cpu_hours` estimates with: 50 GFLOP/s, about what PyTorch
+#: sustains on fp32 matrix products over a few CPU cores (a 2-core machine does less).
+CPU_FLOPS = 5e10
 
 
 # --------------------------------------------------------------------------- the schedule
@@ -118,8 +134,8 @@ def ddim_sample(predict: Callable[[Tensor, int], Tensor], x_T: Tensor, ab: Tenso
     for i, t in enumerate(ts):
         ab_prev = float(ab[ts[i + 1]]) if i + 1 < len(ts) else 1.0
         noise = None
-        if eta > 0 and ab_prev < 1.0:
-            noise = torch.randn(x.shape, generator=generator, dtype=x.dtype)
+        if eta > 0 and ab_prev < 1.0:  # drawn on the generator's (CPU) stream, then moved: seeded alike anywhere
+            noise = torch.randn(x.shape, generator=generator, dtype=x.dtype).to(x.device)
         x = ddim_step(x, predict(x, t), float(ab[t]), ab_prev, eta, noise)
     return x
 
@@ -145,7 +161,8 @@ def segments(hidden: Sequence[int], tokens: str, chunk_size: int) -> list[tuple[
 def sinusoid(positions: Tensor, dim: int) -> Tensor:
     """Transformer sinusoidal embedding (len, dim) of integer positions or timesteps."""
     half = dim // 2
-    freqs = torch.exp(-math.log(10_000.0) * torch.arange(half, dtype=torch.float32) / max(half, 1))
+    freqs = torch.exp(-math.log(10_000.0) * torch.arange(half, dtype=torch.float32, device=positions.device)
+                      / max(half, 1))
     angles = positions.to(torch.float32)[:, None] * freqs[None]
     out = torch.cat([torch.sin(angles), torch.cos(angles)], dim=1)
     return F.pad(out, (0, dim - 2 * half))
@@ -207,14 +224,23 @@ class Denoiser(nn.Module):
         self.out_b = nn.Parameter(torch.empty(self.n_tok, self.span))
         self._segs = tuple(segs)
 
-    def index_buffers(self) -> None:
-        """Gather / scatter indices and the positional table (derived, never saved)."""
+    def index_buffers(self, device: torch.device | str = "cpu") -> None:
+        """Gather / scatter indices and the positional table (derived, never saved), computed
+        on the CPU and kept on `device` (where the parameters are)."""
         gather = torch.full((self.n_tok, self.span), self.width, dtype=torch.long)
         for i, (s, n) in enumerate(self._segs):
             gather[i, :n] = torch.arange(s, s + n)
-        self.gather = gather
-        self.valid = (gather < self.width).reshape(-1)
-        self.positions = sinusoid(torch.arange(self.n_tok + 1), self.d)
+        self.gather = gather.to(device)
+        # the read-out positions that hold a weight, as indices: a boolean mask would make each
+        # forward pass count its True entries on the host (a device sync per step)
+        self.valid = torch.nonzero((gather < self.width).reshape(-1)).squeeze(1).to(device)
+        self.positions = sinusoid(torch.arange(self.n_tok + 1), self.d).to(device)
+
+    def place(self, device: torch.device) -> "Denoiser":
+        """Parameters and the derived index tables on `device`; returns self."""
+        self.to(device)
+        self.index_buffers(device)
+        return self
 
     def forward(self, x: Tensor, t: Tensor, cond: Tensor | None = None) -> Tensor:
         """x (B, W) noisy vectors, t (B,) timestep indices, cond (B, d) condition vectors."""
@@ -228,7 +254,7 @@ class Denoiser(nn.Module):
         for block in self.blocks:
             h = block(h)
         y = torch.einsum("bnd,nds->bns", self.norm(h[:, 1:]), self.out_w) + self.out_b
-        return y.reshape(b, -1)[:, self.valid]
+        return y.reshape(b, -1).index_select(1, self.valid)
 
 
 def init_parameters(model: nn.Module, generator: torch.Generator) -> None:
@@ -299,6 +325,8 @@ def check_params(p: dict[str, Any]) -> dict[str, Any]:
         raise ConfigError(f"{NAME}: guidance={out['guidance']:g} needs p_uncond > 0: with p_uncond=0 the "
                           "unconditional branch is never trained")
     out["prior"] = _choice("prior", p["prior"], PRIORS)
+    if p["max_cpu_hours"] is not None:
+        out["max_cpu_hours"] = _real("max_cpu_hours", p["max_cpu_hours"], 0.0, math.inf, lo_open=True, hi_open=True)
     if p["hidden"] is not None:
         h = p["hidden"]
         if isinstance(h, (str, bytes)) or not isinstance(h, Sequence) or not h:
@@ -315,17 +343,18 @@ class HyperDiffusion(Generator):
 
     learns_from = "nbrdf"
     tags = frozenset({"conditional"})
+    devices = frozenset({"cpu", "cuda"})
 
     def __init__(self, tokens: str = "chunk", chunk_size: int = 45, d_model: int = 128, layers: int = 4,
                  heads: int = 4, epochs: int = 300, batch_size: int = 128, lr: float = 5e-4, lr_final: float = 5e-6,
                  weight_decay: float = 0.0, ema: float = 0.999, ddim_steps: int = 50, eta: float = 0.0,
                  guidance: float = 1.0, condition_on: str | None = None, p_uncond: float = 0.1,
-                 prior: str = "matched", hidden: Sequence[int] | None = None):
+                 prior: str = "matched", hidden: Sequence[int] | None = None, max_cpu_hours: float | None = None):
         super().__init__(**check_params(dict(
             tokens=tokens, chunk_size=chunk_size, d_model=d_model, layers=layers, heads=heads, epochs=epochs,
             batch_size=batch_size, lr=lr, lr_final=lr_final, weight_decay=weight_decay, ema=ema,
             ddim_steps=ddim_steps, eta=eta, guidance=guidance, condition_on=condition_on, p_uncond=p_uncond,
-            prior=prior, hidden=hidden)))
+            prior=prior, hidden=hidden, max_cpu_hours=max_cpu_hours)))
         self.model: Denoiser | None = None
         self.mean = self.std = None
         self.prior: dict[str, Tensor] | None = None  # matched prior: "means", "weights", "basis"
@@ -348,13 +377,70 @@ class HyperDiffusion(Generator):
         return segments(self.hidden, self.params["tokens"], self.params["chunk_size"])
 
     def _build(self, n_classes: int) -> Denoiser:
-        """The denoiser with uninitialised storage (no RNG used); init or load fills it."""
-        p = self.params
-        with torch.device("meta"):
-            model = Denoiser(self._segments(), self.width, p["d_model"], p["layers"], p["heads"], n_classes)
-        model = model.to_empty(device="cpu")
+        """The denoiser with uninitialised storage on the CPU (no RNG used); init or load fills
+        it, `Denoiser.place` moves it."""
+        model = self._skeleton(n_classes).to_empty(device="cpu")
         model.index_buffers()
         return model
+
+    def _skeleton(self, n_classes: int) -> Denoiser:
+        """The denoiser on the meta device: shapes only, no storage."""
+        p = self.params
+        with torch.device("meta"):
+            return Denoiser(self._segments(), self.width, p["d_model"], p["layers"], p["heads"], n_classes)
+
+    def _move(self, device: torch.device) -> None:
+        if self.model is not None:
+            self.model.place(device)
+            self.mean, self.std = self.mean.to(device), self.std.to(device)
+            if self.prior is not None:
+                self.prior = {k: v.to(device) for k, v in self.prior.items()}
+
+    # -- cost of a training run ---------------------------------------------------------
+    def n_parameters(self, n_classes: int = 0) -> int:
+        """Parameters of the denoiser these params build (a class table adds n_classes + 1 rows)."""
+        return sum(q.numel() for q in self._skeleton(n_classes).parameters())
+
+    def training_estimate(self, n_materials: int) -> dict[str, float]:
+        """What training on `n_materials` weight vectors costs, from the parameter count and
+        the step count: {"parameters", "steps", "flop", "cpu_hours" (at CPU_FLOPS), "bytes"}.
+
+        FLOP: 3 × the forward pass (forward and backward), the forward pass being
+        2 × (the transformer blocks' parameters × tokens + the token embeddings and read-outs
+        + the timestep MLP) + the attention products, per training vector and epoch. Bytes:
+        weights, gradients, two Adam moments and the EMA copy (5 × 4 B per parameter), plus
+        one batch's activations (about 20 values per token, width and block, and the
+        attention maps)."""
+        p = self.params
+        model = self._skeleton(0)
+        total = sum(q.numel() for q in model.parameters())
+        blocks = sum(q.numel() for q in model.blocks.parameters())
+        tokens = model.n_tok + 1
+        batch = min(p["batch_size"], n_materials)
+        steps = p["epochs"] * math.ceil(n_materials / max(batch, 1))
+        attention = 4 * p["layers"] * tokens * tokens * p["d_model"]
+        forward = 2 * (blocks * tokens + (total - blocks)) + attention
+        flop = 3.0 * forward * p["epochs"] * n_materials
+        activations = 4 * batch * p["layers"] * (20 * tokens * p["d_model"] + 2 * p["heads"] * tokens * tokens)
+        return {"parameters": float(total), "steps": float(steps), "flop": flop, "cpu_hours": flop / CPU_FLOPS / 3600,
+                "bytes": float(5 * 4 * total + activations)}
+
+    def _check_cpu_budget(self, n_materials: int) -> None:
+        """Refuse, before any work, a CPU training run estimated to take longer than
+        max_cpu_hours (no limit where it is None, the default)."""
+        limit = self.params["max_cpu_hours"]
+        if limit is None or self.device.type != "cpu":
+            return
+        est = self.training_estimate(n_materials)
+        if est["cpu_hours"] <= limit:
+            return
+        raise ConfigError(
+            f"{NAME}: training this {est['parameters'] / 1e6:.1f} M-parameter denoiser on the CPU would take about "
+            f"{_hours(est['cpu_hours'])} ({int(est['steps'])} steps of batch {min(self.params['batch_size'], n_materials)} "
+            f"over {n_materials} materials, {est['flop']:.2g} FLOP at an assumed {CPU_FLOPS / 1e9:.0f} GFLOP/s) and "
+            f"about {est['bytes'] / 2**30:.1f} GiB of memory, more than max_cpu_hours={limit:g} allows: run it on a "
+            f"GPU (device=cuda, or device=auto on a machine with one), or set generator.params.max_cpu_hours=null "
+            f"to train on the CPU anyway")
 
     def _expected_shapes(self, n_classes: int, prior_rank: int) -> dict[str, tuple[int, ...]]:
         shapes = {f"denoiser.{k}": tuple(v.shape) for k, v in self._build(n_classes).state_dict().items()}
@@ -367,6 +453,7 @@ class HyperDiffusion(Generator):
 
     # -- learning ---------------------------------------------------------------------
     def fit(self, data: TrainingData, *, seed: int = 0, progress: bool | str = False) -> "HyperDiffusion":
+        self._check_cpu_budget(len(data))  # before the weight vectors are read (or fitted)
         ws = data.weights()
         self._check_weight_set(ws)
         self.classes, labels = self._labels(data, ws.names)
@@ -382,9 +469,16 @@ class HyperDiffusion(Generator):
         self.std = torch.clamp(std, min=STD_FLOOR * float(std.median().clamp(min=1e-12)))
         z = (x - self.mean) / self.std
         self.prior = self._fit_prior(z, labels) if self.params["prior"] == "matched" else None
-        gen = torch.Generator().manual_seed(int(seed))
+        gen = torch.Generator().manual_seed(int(seed))  # on the CPU wherever the model trains
         self.model = self._build(len(self.classes))
         init_parameters(self.model, gen)
+        device = self.device
+        if device.type != "cpu":  # the data and the model move once; the draws stay on `gen`
+            self.model.place(device)
+            self.mean, self.std = self.mean.to(device), self.std.to(device)
+            if self.prior is not None:
+                self.prior = {k: v.to(device) for k, v in self.prior.items()}
+            z, labels = z.to(device), None if labels is None else labels.to(device)
         self._train(z, labels, gen, progress, seed)
         return self
 
@@ -427,12 +521,17 @@ class HyperDiffusion(Generator):
                 "basis": (lam[keep].sqrt()[:, None] * vh[keep]).to(torch.float32).contiguous()}
 
     def _train(self, z: Tensor, labels: Tensor | None, gen: torch.Generator, progress, seed: int) -> None:
+        """AdamW on the ε-loss, on the device z lives on. Every random number is drawn from
+        `gen` (a CPU generator) in the order of the steps, an epoch's worth at a time, and
+        moved there once per epoch; the loss is summed there and read once per epoch, so the
+        host never waits for the device inside an epoch. On the CPU this is the arithmetic
+        of a loop that draws at each step."""
         p, model = self.params, self.model
-        n = z.shape[0]
+        n, device = z.shape[0], z.device
         batch = min(p["batch_size"], n)
         steps_per_epoch = math.ceil(n / batch)
         total = p["epochs"] * steps_per_epoch
-        ab = alpha_bars(beta_schedule()).to(torch.float32)
+        ab = alpha_bars(beta_schedule()).to(torch.float32).to(device)
         opt = torch.optim.AdamW(model.parameters(), lr=p["lr"], weight_decay=p["weight_decay"])
         ema = [q.detach().clone() for q in model.parameters()] if p["ema"] > 0 else None
         losses, walls, t0, step = [], [], time.perf_counter(), 0
@@ -440,10 +539,13 @@ class HyperDiffusion(Generator):
                    disable=not progress, leave=False, dynamic_ncols=True)
         model.train()
         for _ in bar:
-            perm, total_loss = torch.randperm(n, generator=gen), 0.0
+            perm, t, eps, drop = self._epoch_draws(n, batch, z.shape[1], labels is not None, gen, device)
+            total_loss = torch.zeros((), dtype=torch.float64, device=device)
             for start in range(0, n, batch):
-                idx = perm[start:start + batch]
-                loss = self._loss(z[idx], None if labels is None else labels[idx], ab, gen)
+                rows = slice(start, start + batch)
+                idx = perm[rows]
+                loss = self._loss(z[idx], None if labels is None else labels[idx], ab, t[rows], eps[rows],
+                                  None if drop is None else drop[rows])
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
                 nn.utils.clip_grad_norm_(model.parameters(), 1.0)
@@ -453,8 +555,8 @@ class HyperDiffusion(Generator):
                 if ema is not None:
                     _ema_update(ema, model.parameters(), min(p["ema"], (1 + step) / (10 + step)))
                 step += 1
-                total_loss += float(loss.detach()) * len(idx)
-            losses.append(total_loss / n)
+                total_loss += loss.detach().double() * len(idx)  # fp64, as a host float sum would be
+            losses.append(float(total_loss) / n)  # the epoch's one read of the device
             walls.append(time.perf_counter() - t0)
             bar.set_postfix(loss=f"{losses[-1]:.4f}")
         if ema is not None:
@@ -465,16 +567,30 @@ class HyperDiffusion(Generator):
         self.curve = {"loss": [round(v, 6) for v in losses], "wall_s": [round(v, 3) for v in walls],
                       "steps": step, "batch_size": batch, "materials": n, "seed": int(seed)}
 
-    def _loss(self, x0: Tensor, labels: Tensor | None, ab: Tensor, gen: torch.Generator) -> Tensor:
-        """‖ε − ε̂(√ᾱ_t x₀ + √(1 − ᾱ_t) ε, t, c)‖² (mean), t uniform, c dropped with p_uncond."""
-        b = x0.shape[0]
-        t = torch.randint(0, T, (b,), generator=gen)
-        eps = torch.randn(x0.shape, generator=gen)
+    def _epoch_draws(self, n: int, batch: int, width: int, conditional: bool, gen: torch.Generator,
+                     device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
+        """An epoch's random numbers, drawn from `gen` in the order a step-by-step loop draws
+        them (the permutation; then per step t, ε and, conditioned, the dropout draw), and
+        moved to `device` once: (perm (n,), t (n,), ε (n, W), drop (n,) or None)."""
+        perm = torch.randperm(n, generator=gen)
+        ts, epss, drops = [], [], []
+        for start in range(0, n, batch):
+            b = min(batch, n - start)
+            ts.append(torch.randint(0, T, (b,), generator=gen))
+            epss.append(torch.randn((b, width), generator=gen))
+            if conditional:
+                drops.append(torch.rand(b, generator=gen) < self.params["p_uncond"])
+        drop = torch.cat(drops).to(device) if conditional else None
+        return perm.to(device), torch.cat(ts).to(device), torch.cat(epss).to(device), drop
+
+    def _loss(self, x0: Tensor, labels: Tensor | None, ab: Tensor, t: Tensor, eps: Tensor,
+              drop: Tensor | None) -> Tensor:
+        """‖ε − ε̂(√ᾱ_t x₀ + √(1 − ᾱ_t) ε, t, c)‖² (mean): t uniform, ε ~ N(0, I), c dropped where
+        `drop` (drawn with probability p_uncond)."""
         a = ab[t][:, None]
         xt = a.sqrt() * x0 + (1 - a).sqrt() * eps
         cond = None
         if labels is not None:
-            drop = torch.rand(b, generator=gen) < self.params["p_uncond"]
             cond = self.model.cond(labels, drop)
         return F.mse_loss(self.model(xt, t, cond), eps)
 
@@ -506,7 +622,11 @@ class HyperDiffusion(Generator):
         return torch.tensor([index[c] for c in wanted], dtype=torch.long)
 
     def _sample(self, n: int, condition: Any, seed: int) -> SampleSet:
+        """Drawn from a CPU generator seeded by `seed` (moved to the model's device after each
+        draw): the same seed draws the same numbers on every device."""
         labels = self._condition_labels(n, condition)
+        if labels is not None:
+            labels = labels.to(self.device)
         gen = torch.Generator().manual_seed(seed)
         x_T = self._prior_draw(n, labels, gen)
         out = torch.cat([self._denoise(x_T[s:s + SAMPLE_BATCH], None if labels is None else labels[s:s + SAMPLE_BATCH],
@@ -518,13 +638,14 @@ class HyperDiffusion(Generator):
     def _prior_draw(self, n: int, labels: Tensor | None, gen: torch.Generator) -> Tensor:
         """x_T in the standardised space: N(0, I), or the matched prior of each sample's class
         (without a condition, the class drawn by its training share)."""
-        noise = torch.randn((n, self.width), generator=gen)
+        device = self.device
+        noise = torch.randn((n, self.width), generator=gen).to(device)
         if self.prior is None:
             return noise
         if labels is None:
-            labels = torch.multinomial(self.prior["weights"], n, replacement=True, generator=gen)
+            labels = torch.multinomial(self.prior["weights"].cpu(), n, replacement=True, generator=gen).to(device)
         ab_T = float(alpha_bars(beta_schedule())[-1])
-        z = torch.randn((n, self.prior["basis"].shape[0]), generator=gen)
+        z = torch.randn((n, self.prior["basis"].shape[0]), generator=gen).to(device)
         return math.sqrt(ab_T) * (self.prior["means"][labels] + z @ self.prior["basis"]) + math.sqrt(1.0 - ab_T) * noise
 
     @torch.no_grad()
@@ -533,13 +654,15 @@ class HyperDiffusion(Generator):
         b = x_T.shape[0]
         w = p["guidance"]
         cond = uncond = None
+        device = x_T.device
         if self.classes:
-            uncond = model.cond(torch.zeros(b, dtype=torch.long), torch.ones(b, dtype=torch.bool))
+            uncond = model.cond(torch.zeros(b, dtype=torch.long, device=device),
+                                torch.ones(b, dtype=torch.bool, device=device))
             if labels is not None:
-                cond = model.cond(labels, torch.zeros(b, dtype=torch.bool))
+                cond = model.cond(labels, torch.zeros(b, dtype=torch.bool, device=device))
 
         def predict(x: Tensor, t: int) -> Tensor:
-            tt = torch.full((x.shape[0],), t, dtype=torch.long)
+            tt = torch.full((x.shape[0],), t, dtype=torch.long, device=device)
             if cond is None:
                 return model(x, tt, uncond)
             if w == 1.0:
@@ -630,6 +753,10 @@ class HyperDiffusion(Generator):
         self.classes = list(classes)
         training = metadata.get("training", {})
         self.curve = dict(training) if isinstance(training, dict) else {}
+
+
+def _hours(h: float) -> str:
+    return f"{h:.1f} h" if h < 10 else f"{h:.0f} h" if h < 48 else f"{h / 24:.0f} days"
 
 
 def _learning_rate(lr: float, lr_final: float, step: int, total: int) -> float:

@@ -17,6 +17,13 @@ The principal directions come from the n × n Gram matrix in fp64 (n ≪ the dim
 accumulated over blocks of coordinates so the observations stay fp32 and no fp64 copy
 of them is made. Each component's sign is fixed (largest training score positive) so a
 fit does not depend on the eigensolver's sign choice.
+
+Devices: both run on "cpu" and "cuda" (`to`): the Gram matrix, the eigendecomposition and the
+basis are computed on the generator's device and the fitted tensors live there. PCA-A's
+tables stay on the host (read one at a time, they can outgrow a GPU) and go to the device a
+block of cells at a time; its medians select values, so its reference is the same on any
+device. Sampling draws its coefficients from a CPU generator (the same numbers on every
+device); a table is combined on the device and unmapped on the CPU.
 """
 
 from __future__ import annotations
@@ -108,19 +115,24 @@ def block_columns(n_rows: int, n_cols: int) -> list[slice]:
 # --------------------------------------------------------------------------- the decomposition
 
 
-def gram_pca(x: torch.Tensor, k: int, owner: str = "pca") -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, float]:
+def gram_pca(x: torch.Tensor, k: int, owner: str = "pca",
+             device: torch.device | str | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, float]:
     """Principal directions of centred observations x (n, D) through their Gram matrix.
 
     Returns (eigenvalues (k',) fp64 descending, scores (n, k') fp64, basis (D, k') with
     orthonormal columns in x's dtype, total = trace of the Gram matrix). k' ≤ k drops
     components with a numerically zero eigenvalue. Scores are x @ basis (the training
     coefficients): column j has squared norm eigenvalue j.
+
+    `device` (default: x's) is where the products run and the results live: x may stay
+    on the host, each block of columns going to the device as it is needed.
     """
     n, d = x.shape
+    device = x.device if device is None else torch.device(device)
     blocks = block_columns(n, d)
-    gram = torch.zeros(n, n, dtype=torch.float64)
+    gram = torch.zeros(n, n, dtype=torch.float64, device=device)
     for c in blocks:
-        block = x[:, c].double()
+        block = x[:, c].to(device).double()
         gram += block @ block.T
     eigvals, eigvecs = logrel.top_eigen(gram, min(k, n))
     keep = int((eigvals > RANK_TOLERANCE * eigvals[0].clamp_min(1e-300)).sum()) if eigvals.numel() else 0
@@ -132,24 +144,26 @@ def gram_pca(x: torch.Tensor, k: int, owner: str = "pca") -> tuple[torch.Tensor,
     eigvals, eigvecs = eigvals[:keep], eigvecs[:, :keep]
     # Fix each sign: the training material with the largest |score| scores positive.
     rows = eigvecs.abs().argmax(dim=0)
-    eigvecs = eigvecs * torch.sign(eigvecs[rows, torch.arange(keep)])
+    eigvecs = eigvecs * torch.sign(eigvecs[rows, torch.arange(keep, device=device)])
     scale = eigvecs / eigvals.sqrt()
-    basis = torch.empty(d, keep, dtype=x.dtype)
+    basis = torch.empty(d, keep, dtype=x.dtype, device=device)
     for c in blocks:
-        basis[c] = (x[:, c].double().T @ scale).to(x.dtype)
+        basis[c] = (x[:, c].to(device).double().T @ scale).to(x.dtype)
     return eigvals, eigvecs * eigvals.sqrt(), basis, float(gram.trace())
 
 
 def gaussian_coefficients(n: int, std: torch.Tensor, seed: int) -> torch.Tensor:
-    """(n, k) fp64 coefficients, column j ~ N(0, std_j²), from a generator seeded by `seed`."""
+    """(n, k) fp64 coefficients, column j ~ N(0, std_j²), from a CPU generator seeded by
+    `seed` (the same draw on every device), on std's device."""
     g = torch.Generator().manual_seed(int(seed))
-    return torch.randn(n, std.numel(), generator=g, dtype=torch.float64) * std.double()
+    return torch.randn(n, std.numel(), generator=g, dtype=torch.float64).to(std.device) * std.double()
 
 
 def chunked_combine(basis: torch.Tensor, coefficients: torch.Tensor) -> torch.Tensor:
-    """basis (D, k) @ coefficients (k,), a block of rows at a time in the basis dtype; fp64 (D,)."""
-    c = coefficients.to(basis.dtype)
-    out = torch.empty(basis.shape[0], dtype=torch.float64)
+    """basis (D, k) @ coefficients (k,), a block of rows at a time in the basis dtype; fp64
+    (D,) on the basis' device."""
+    c = coefficients.to(device=basis.device, dtype=basis.dtype)
+    out = torch.empty(basis.shape[0], dtype=torch.float64, device=basis.device)
     for rows in block_columns(basis.shape[1], basis.shape[0]):
         out[rows] = (basis[rows] @ c).double()
     return out
@@ -199,16 +213,20 @@ def check_components(owner: str, tensors: dict, k_max: int, name: str = "std") -
 
 
 
-def _median_reference(x: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
-    """(3, P) fp32: per cell and channel, the median of the materials' valid values (0 where none is valid).
+def _median_reference(x: torch.Tensor, valid: torch.Tensor, device: torch.device | None = None) -> torch.Tensor:
+    """(3, P) fp32 on the CPU: per cell and channel, the median of the materials' valid values
+    (0 where none is valid).
 
-    Block by block of cells, so the masked copy that nanmedian sorts stays small.
+    Block by block of cells, so the masked copy that nanmedian sorts stays small; each block
+    is sorted on `device` (default: x's). A median selects one of the values (the lower
+    middle one), so the result is the same on every device.
     """
     n, _, p = x.shape
+    device = x.device if device is None else device
     reference = torch.empty(3, p, dtype=torch.float32)
     for c in block_columns(3 * n, p):
-        block = torch.where(valid[:, None, c], x[:, :, c], float("nan"))
-        reference[:, c] = torch.nanmedian(block, dim=0).values
+        block = torch.where(valid[:, None, c].to(device), x[:, :, c].to(device), float("nan"))
+        reference[:, c] = torch.nanmedian(block, dim=0).values.cpu()
     return torch.nan_to_num(reference, nan=0.0).clamp_min(0.0)
 
 
@@ -217,6 +235,7 @@ class PCABRDF(Generator):
 
     learns_from = "tables"
     NAME = "pca_brdf"
+    devices = frozenset({"cpu", "cuda"})
 
     def __init__(self, k: int = 300, max_materials: int | None = None):
         k = positive_int(self.NAME, "k", k)
@@ -251,15 +270,20 @@ class PCABRDF(Generator):
         check_fit_memory(self.NAME, need, f"max_materials (now {self.params['max_materials']}, {n} used) or k")
         x, valid = self._load(data, names, progress)
         read_seconds = time.perf_counter() - start
-        reference = _median_reference(x, valid)
+        # The tables stay on the host (they are read one at a time and can outgrow a GPU); the
+        # medians, the Gram matrix and the basis are computed on self.device, block by block,
+        # and the fitted tensors live there. The medians and the mapping are the same on any
+        # device; the products differ in the last bits between devices.
+        device = self.device
+        reference = _median_reference(x, valid, device)
         self._map_in_place(x, valid, reference)
         del valid
         x = x.reshape(n, -1)
         mean = x.mean(dim=0)
         x -= mean
-        eigvals, _, basis, total = gram_pca(x, k, self.NAME)
+        eigvals, _, basis, total = gram_pca(x, k, self.NAME, device=device)
         del x
-        self.reference, self.mean, self.basis = reference, mean, basis
+        self.reference, self.mean, self.basis = reference.to(device), mean.to(device), basis
         self.std = (eigvals / (n - 1)).sqrt()
         self.info = {
             "n_materials": n, "k": int(eigvals.numel()),
@@ -293,11 +317,17 @@ class PCABRDF(Generator):
     def _sample(self, n: int, condition: Any, seed: int) -> SampleSet:
         return TableSamples(gaussian_coefficients(n, self.std, seed), self.to_table, name=self.NAME)
 
+    def _move(self, device: torch.device) -> None:
+        if self.basis is not None:
+            for key in ("reference", "mean", "basis", "std"):
+                setattr(self, key, getattr(self, key).to(device))
+
     def to_table(self, coefficients: torch.Tensor) -> merl.MerlTable:
-        """The full MERL table of one coefficient vector (k,); cells below the horizon invalid."""
+        """The full MERL table of one coefficient vector (k,); cells below the horizon invalid.
+        Combined where the basis lives, unmapped on the CPU."""
         _, w = logrel.domain()
         mapped = (self.mean.double() + chunked_combine(self.basis, coefficients)).clamp(-MAX_MAPPED, MAX_MAPPED)
-        return domain_table(logrel.from_mapped(mapped.view(3, -1), self.reference.double(), w))
+        return domain_table(logrel.from_mapped(mapped.view(3, -1).cpu(), self.reference.double().cpu(), w))
 
     def sample_nbytes(self, n: int) -> int:
         k = self.params["k"] if self.std is None else self.std.numel()
@@ -385,6 +415,7 @@ class PCANBRDF(Generator):
 
     learns_from = "nbrdf"
     NAME = "pca_nbrdf"
+    devices = frozenset({"cpu", "cuda"})
 
     def __init__(self, k: int = 100):
         super().__init__(k=positive_int(self.NAME, "k", k))
@@ -402,7 +433,7 @@ class PCANBRDF(Generator):
         if k < self.params["k"]:
             log.info("%s: k=%d capped at %d (%d training vectors, mean removed; %d weights each)",
                      self.NAME, self.params["k"], k, n, width)
-        x = torch.from_numpy(np.ascontiguousarray(ws.vectors)).double()
+        x = torch.from_numpy(np.ascontiguousarray(ws.vectors)).double().to(self.device)
         if bool((x == x[0]).all()):
             raise ConfigError(f"{self.NAME}: the {n} training weight vectors are identical: no variance to model")
         mean = x.mean(dim=0)
@@ -412,6 +443,10 @@ class PCANBRDF(Generator):
         self.info = {"n_materials": n, "k": int(eigvals.numel()), "explained_variance": (eigvals / total).tolist(),
                      "fit_seconds": time.perf_counter() - start}
         return self
+
+    def _move(self, device: torch.device) -> None:
+        if self.basis is not None:
+            self.mean, self.basis, self.std = self.mean.to(device), self.basis.to(device), self.std.to(device)
 
     def _sample(self, n: int, condition: Any, seed: int) -> SampleSet:
         c = gaussian_coefficients(n, self.std, seed)

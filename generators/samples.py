@@ -3,6 +3,10 @@
 Each item is built when it is asked for, so a set of full 90×90×180 tables (35 MB each)
 never has to sit in memory at once; the set's `array` keeps the raw per-sample
 parameters the generator drew.
+
+Devices: `array` lives where the generator sampled. A weight sample is built there too (an
+NBRDF moved with `to`, evaluating inputs on that device: `brdfbench.device.on_host` wraps
+it for host inputs); a table sample is always a CPU table (`to_table` returns one).
 """
 
 from __future__ import annotations
@@ -43,7 +47,8 @@ class WeightSamples(SampleSet):
         from brdfbench_representations.nbrdf import NaiveMLP, NBRDF
 
         cls = NaiveMLP if self.features == "directions" else NBRDF
-        return cls.from_network(self.network(i))
+        model = cls.from_network(self.network(i))
+        return model if self.array.device.type == "cpu" else model.to(self.array.device)
 
 
 class TableSamples(SampleSet):

@@ -50,6 +50,13 @@ weights are kept. The monitored loss is that of a held-out `val_fraction` of the
 training vectors (evaluated at z = μ, deterministic), or, where that leaves fewer than
 1 held-out or 2 training vectors, the training loss. VAE-A trains at lr 1e-3, not B.5's
 5e-3: at 5e-3 Adam diverged on 180 synthetic tables (the loss went from 0.12 to 25).
+
+Devices: both run on "cpu" and "cuda" (`to`). The data are prepared on the CPU (VAE-A reads
+and reduces its tables there, the Gram matrix and the basis computed on the device) and
+moved once; the networks are initialised on the CPU from the seed and moved. Shuffles and
+noise come from CPU generators in a step-by-step loop's order, an epoch's draws moved at
+once, and the epoch's loss sums stay on the device in fp64 and are read once per epoch: on
+the CPU this is the arithmetic of a loop that reads each step's loss, bit for bit.
 """
 
 from __future__ import annotations
@@ -232,7 +239,8 @@ def loss_terms(net: VAENet, x: torch.Tensor, weight: torch.Tensor, total: float,
 def train(net: VAENet, x: torch.Tensor, x_val: torch.Tensor | None, weight: torch.Tensor, total: float,
           recipe: Recipe, seed: int, progress, label: str) -> dict[str, Any]:
     """Adam on the ELBO with early stopping (see the module docstring); keeps the best weights.
-    Returns the training curves."""
+    Returns the training curves. Runs where `net` and the data are (one device); the
+    random numbers come from CPU generators (`rng`) on every device."""
     with torch_threads(1):
         g = rng(seed, 2)
         opt = torch.optim.Adam(net.parameters(), lr=recipe.lr)
@@ -262,20 +270,32 @@ def train(net: VAENet, x: torch.Tensor, x_val: torch.Tensor | None, weight: torc
             "monitored": "val_loss" if x_val is not None else "train_loss"}
 
 
+def epoch_draws(n: int, recipe: Recipe, g: torch.Generator, device: torch.device) -> list[tuple[torch.Tensor, torch.Tensor]]:
+    """An epoch's shuffled batches and their latent noise, drawn from `g` (a CPU generator)
+    in a step-by-step loop's order (the permutation, then each batch's ε), moved to `device`
+    once: [(rows, ε)] per batch."""
+    batches = torch.randperm(n, generator=g).split(recipe.batch_size)
+    eps = [torch.randn(rows.numel(), recipe.latent, generator=g) for rows in batches]
+    rows_d, eps_d = torch.cat(batches).to(device), torch.cat(eps).to(device)
+    sizes = [rows.numel() for rows in batches]
+    return list(zip(rows_d.split(sizes), eps_d.split(sizes)))
+
+
 def train_epoch(net: VAENet, opt: torch.optim.Optimizer, x: torch.Tensor, weight: torch.Tensor, total: float,
                 recipe: Recipe, g: torch.Generator) -> tuple[float, float]:
-    """One pass over x in shuffled batches; the epoch's mean loss and mean KL."""
+    """One pass over x in shuffled batches; the epoch's mean loss and mean KL. The sums stay
+    on x's device in fp64 (what host floats would hold) and are read once, at the end."""
     net.train()
-    sum_loss, sum_kl = 0.0, 0.0
-    for rows in torch.randperm(x.shape[0], generator=g).split(recipe.batch_size):
-        eps = torch.randn(rows.numel(), recipe.latent, generator=g)
+    sums = torch.zeros(2, dtype=torch.float64, device=x.device)  # loss, KL
+    for rows, eps in epoch_draws(x.shape[0], recipe, g, x.device):
         recon, kl = loss_terms(net, x[rows], weight, total, eps)
         loss = recon + recipe.kl_weight * kl
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-        sum_loss += float(loss.detach()) * rows.numel()
-        sum_kl += float(kl.detach()) * rows.numel()
+        sums[0] += loss.detach().double() * rows.numel()
+        sums[1] += kl.detach().double() * rows.numel()
+    sum_loss, sum_kl = sums.tolist()
     return sum_loss / x.shape[0], sum_kl / x.shape[0]
 
 
@@ -308,9 +328,10 @@ class EarlyStop:
 
 
 def decode(net: VAENet, n: int, seed: int) -> torch.Tensor:
-    """Decoder outputs (n, d) of z ~ N(0, I) drawn from a generator seeded by `seed`."""
+    """Decoder outputs (n, d) of z ~ N(0, I) drawn from a CPU generator seeded by `seed`,
+    decoded on the net's device (the outputs live there)."""
     g = torch.Generator().manual_seed(int(seed))
-    z = torch.randn(n, net.latent, generator=g)
+    z = torch.randn(n, net.latent, generator=g).to(next(net.parameters()).device)
     with torch.no_grad(), torch_threads(1):
         return torch.cat([net.decode(b) for b in z.split(DECODE_BATCH)])
 
@@ -327,6 +348,7 @@ class VAENBRDF(Generator):
 
     learns_from = "nbrdf"
     NAME = "vae_nbrdf"
+    devices = frozenset({"cpu", "cuda"})
 
     def __init__(self, latent: int = 100, hidden: int = 100, layers: int = 4, epochs: int = 2000,
                  batch_size: int = 32, lr: float = 1e-3, kl_weight: float = 2e-3, patience: int | None = 200,
@@ -352,14 +374,20 @@ class VAENBRDF(Generator):
         if not varying.any():
             raise ConfigError(f"{self.NAME}: the training weight vectors are identical: no variance to model")
         z = (x - mean) / torch.where(varying, std, 1.0)
-        net = VAENet(width, self.recipe, rng(seed, 1))
-        curves = train(net, z[train_rows], z[val_rows] if val_rows.numel() else None, varying.float(),
-                       float(varying.sum()), self.recipe, seed, progress, self.NAME)
-        self.net, self.mean, self.std, self.layout = net, mean, std, weight_layout(ws)
+        device = self.device  # built and standardised on the CPU; the net and the vectors move once
+        net = VAENet(width, self.recipe, rng(seed, 1)).to(device)
+        curves = train(net, z[train_rows].to(device), z[val_rows].to(device) if val_rows.numel() else None,
+                       varying.float().to(device), float(varying.sum()), self.recipe, seed, progress, self.NAME)
+        self.net, self.mean, self.std, self.layout = net, mean.to(device), std.to(device), weight_layout(ws)
         self.info = {"n_materials": n, "n_train": int(train_rows.numel()), "n_held_out": int(val_rows.numel()),
                      "constant_coordinates": int((~varying).sum()), **curves,
                      "fit_seconds": time.perf_counter() - start}
         return self
+
+    def _move(self, device: torch.device) -> None:
+        if self.net is not None:
+            self.net.to(device)
+            self.mean, self.std = self.mean.to(device), self.std.to(device)
 
     def _sample(self, n: int, condition: Any, seed: int) -> SampleSet:
         out = decode(self.net, n, seed)
@@ -488,19 +516,22 @@ class Reduction(NamedTuple):
     held_out: torch.Tensor | None  # (n_val, r) fp32, likewise
 
 
-def reduce_tables(x: torch.Tensor, n_train: int, r: int, owner: str) -> Reduction:
+def reduce_tables(x: torch.Tensor, n_train: int, r: int, owner: str,
+                  device: torch.device | None = None) -> Reduction:
     """The reduction of low-resolution tables x (n, D), training rows first; x is modified
-    (centred, scaled) in place."""
+    (centred, scaled) in place on the CPU. The Gram matrix, the basis and the coefficients
+    are computed on `device` (default: x's), where the returned tensors but `mean` live."""
+    device = x.device if device is None else device
     mean = x[:n_train].mean(dim=0)
     x -= mean
     d = x.shape[1]
     squares = sum(float((x[:n_train, c].double() ** 2).sum()) for c in block_columns(n_train, d))
     scale = max(math.sqrt(squares / ((n_train - 1) * d)), 1e-30)
     x /= scale
-    eigvals, scores, basis, total = gram_pca(x[:n_train], r, owner)
+    eigvals, scores, basis, total = gram_pca(x[:n_train], r, owner, device=device)
     variance = eigvals / (n_train - 1)
     whitened = (scores / variance.sqrt()).float()
-    held = (x[n_train:] @ basis) / variance.sqrt().float() if x.shape[0] > n_train else None
+    held = (x[n_train:].to(device) @ basis) / variance.sqrt().float() if x.shape[0] > n_train else None
     return Reduction(mean, scale, basis, variance, eigvals / total, whitened, held)
 
 
@@ -510,6 +541,7 @@ class VAEBRDF(Generator):
 
     learns_from = "tables"
     NAME = "vae_brdf"
+    devices = frozenset({"cpu", "cuda"})
 
     def __init__(self, latent: int = 300, hidden: int = 256, layers: int = 4, epochs: int = 2000,
                  batch_size: int = 16, lr: float = 1e-3, kl_weight: float = 2e-3, patience: int | None = 200,
@@ -547,14 +579,15 @@ class VAEBRDF(Generator):
         r = self._reduce_dim(n_train)
         need = self.fit_nbytes(len(names), r)
         check_fit_memory(self.NAME, need, f"max_materials (now {self.params['max_materials']}, {len(names)} used)")
-        red = reduce_tables(self._load(data, order, n_train, progress), n_train, r, self.NAME)
+        device = self.device  # tables read and reduced on the CPU; the products and the VAE on `device`
+        red = reduce_tables(self._load(data, order, n_train, progress), n_train, r, self.NAME, device)
         read_seconds = time.perf_counter() - start
-        net = VAENet(red.basis.shape[1], self.recipe, rng(seed, 1))
+        net = VAENet(red.basis.shape[1], self.recipe, rng(seed, 1)).to(device)
         curves = train(net, red.whitened, red.held_out, red.variance.float(), float(red.mean.numel()),
                        self.recipe, seed, progress, self.NAME)
-        self.net, self.mean, self.basis = net, red.mean, red.basis
+        self.net, self.mean, self.basis = net, red.mean.to(device), red.basis
         self.component_std = red.variance.sqrt().float()
-        self.scale = torch.tensor([red.scale], dtype=torch.float64)
+        self.scale = torch.tensor([red.scale], dtype=torch.float64, device=device)
         self.info = {"n_materials": len(names), "n_train": int(n_train), "n_held_out": int(val_rows.numel()),
                      "reduce_dim": int(red.basis.shape[1]), "values_per_table": int(red.mean.numel()),
                      "explained_variance": red.explained.tolist(), **curves,
@@ -589,14 +622,21 @@ class VAEBRDF(Generator):
             x[i] = torch.where(valid[i].repeat(3), x[i], fill)
         return x
 
+    def _move(self, device: torch.device) -> None:
+        if self.net is not None:
+            self.net.to(device)
+            for key in ("mean", "scale", "basis", "component_std"):
+                setattr(self, key, getattr(self, key).to(device))
+
     def _sample(self, n: int, condition: Any, seed: int) -> SampleSet:
         coefficients = decode(self.net, n, seed) * self.component_std
         return TableSamples(coefficients, self.to_table, name=self.NAME)
 
     def to_table(self, coefficients: torch.Tensor) -> merl.MerlTable:
-        """The full MERL table of one decoded coefficient vector (r,)."""
+        """The full MERL table of one decoded coefficient vector (r,): the low-resolution
+        values combined where the basis lives, the table built on the CPU."""
         low = self.mean.double() + float(self.scale) * chunked_combine(self.basis, coefficients)
-        return low_to_table(low.view(3, -1))
+        return low_to_table(low.view(3, -1).cpu())
 
     def sample_nbytes(self, n: int) -> int:
         r = self.recipe

@@ -14,6 +14,16 @@ as `MerlTable.values`), `MerlTable`s, or cell sources read lazily (`MerlFileCell
 each set's transformed values are stacked and the pairwise L1 sums taken by a compiled
 kernel (numba, both cores), all in fp64, so memory stays at a chunk of every member beside
 the members themselves.
+
+On a CUDA device (`device=`), or with `backend="torch"` anywhere, the same walk runs in
+torch (`_torch_matrix`): per chunk of cells every member's values are stacked on the device
+(each member's values cross to the device once: tables in their own dtype, representations
+evaluated where they live), the cells not valid in every member are zeroed (they add
+nothing to any sum, and are not counted), the transform applied in place, and the pairwise
+L1 sums taken by `torch.cdist(p=1)` over column blocks small enough for the device's cache,
+in fp64. Chunks are sized from `DEVICE_BYTES`, so device memory stays near that budget
+whatever the number of members (plus the N × N result). It agrees with the numba kernel to
+rounding (about 1e-14 relative; the sums run in another order).
 """
 
 from __future__ import annotations
@@ -32,6 +42,20 @@ from brdfbench import merl
 KINDS = ("l1", "l1_log", "l1_log_cos")
 #: Cells per chunk: 3 channels × this × (|A| + |B|) fp64 values are live at once.
 CHUNK_CELLS = 1 << 15
+#: "auto": numba on the CPU, torch on a CUDA device; "torch" also runs on the CPU (CI checks
+#: it against numba there).
+BACKENDS = ("auto", "numba", "torch")
+#: Device memory the torch path's chunks may take (the stacked chunk, its column-blocked
+#: copy and the validity masks): chunks hold about DEVICE_BYTES / (|A ∪ B| · 3 · BYTES_PER_VALUE)
+#: cells, at most `DEVICE_CHUNK_CELLS`.
+DEVICE_BYTES = 2 << 30
+BYTES_PER_VALUE = 20
+DEVICE_CHUNK_CELLS = 1 << 18
+#: Bytes of one set's column block in the torch path: small enough that a block of every
+#: member stays in the GPU's L2 cache while each pair of rows is compared.
+COLUMN_BLOCK_BYTES = 12 << 20
+#: Bytes of the per-block pairwise sums taken in one call (column blocks × |A| × |B| fp64).
+SUMS_BYTES = 256 << 20
 
 
 class CellSource(Protocol):
@@ -63,11 +87,29 @@ class RepresentationCells:
     model: object
 
     def grid_cells(self, cells: np.ndarray) -> np.ndarray:
+        if self.device.type != "cpu":
+            return self.on_device(torch.from_numpy(np.asarray(cells)), torch.device("cpu")).numpy()
         wi, wo = merl.grid_directions(torch.float64)
         idx = torch.from_numpy(np.asarray(cells))
         with torch.no_grad():
             f = self.model.eval(wi[idx], wo[idx])
         return f.detach().to(torch.float64).numpy().T
+
+    @property
+    def device(self) -> torch.device:
+        """Where the representation evaluates (`Placed.device`; the CPU for a plain object)."""
+        where = getattr(self.model, "device", None)
+        return torch.device("cpu") if where is None else torch.device(where)
+
+    def on_device(self, cells: torch.Tensor, device: torch.device) -> torch.Tensor:
+        """(3, len(cells)) float64 on `device`: evaluated on the representation's own device
+        (its inputs there, so a model on a GPU never computes on the host), then moved."""
+        here = self.device
+        wi, wo = _grid_directions_on(here)
+        idx = cells.to(here)
+        with torch.no_grad():
+            f = self.model.eval(wi[idx], wo[idx])
+        return f.detach().to(torch.float64).T.to(device)
 
 
 class _Array:
@@ -77,10 +119,44 @@ class _Array:
     def grid_cells(self, cells: np.ndarray) -> np.ndarray:
         return np.asarray(self.flat[:, cells], dtype=np.float64)
 
+    def on_device(self, cells: torch.Tensor, device: torch.device) -> torch.Tensor:
+        """The values at `cells` moved in their own float dtype (half the bytes of fp64 for a
+        float32 table); the caller widens them to fp64 on the device, exactly."""
+        v = self.flat[:, cells.numpy()]
+        v = v if v.dtype in (np.float32, np.float64) else v.astype(np.float64)
+        return torch.from_numpy(np.ascontiguousarray(v)).to(device)
+
+
+class _Tensor:
+    """A (3, 90, 90, 180) tensor member: gathered where it lives (a table already on a GPU
+    never crosses to the host in the torch path)."""
+
+    def __init__(self, values: torch.Tensor):
+        self.flat = values.detach().reshape(3, -1)
+
+    def grid_cells(self, cells: np.ndarray) -> np.ndarray:
+        idx = torch.from_numpy(np.asarray(cells)).to(self.flat.device)
+        return self.flat[:, idx].to(torch.float64).cpu().numpy()
+
+    def on_device(self, cells: torch.Tensor, device: torch.device) -> torch.Tensor:
+        return self.flat[:, cells.to(self.flat.device)].to(device)
+
+
+@lru_cache(maxsize=4)
+def _grid_directions_on(device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """The fp64 grid directions on `device` (one copy per device; never modify in place)."""
+    wi, wo = merl.grid_directions(torch.float64)
+    return (wi, wo) if device.type == "cpu" else (wi.to(device), wo.to(device))
+
 
 def _source(member, where: str) -> CellSource:
     if hasattr(member, "grid_cells"):
         return member
+    if isinstance(member, torch.Tensor):
+        if tuple(member.shape) != (3, *merl.SHAPE) or not member.is_floating_point():
+            raise ValueError(f"{where}: expected MERL values of shape (3, {', '.join(map(str, merl.SHAPE))}), "
+                             f"a MerlTable or a cell source, got a {member.dtype} tensor of shape {tuple(member.shape)}")
+        return _Tensor(member)
     v = member.values if hasattr(member, "values") and not isinstance(member, np.ndarray) else member
     v = np.asarray(v)
     if v.shape != (3, *merl.SHAPE):
@@ -149,18 +225,30 @@ def common_valid_cells(*sets: Sequence, chunk_cells: int = 1 << 20) -> np.ndarra
 
 
 def distance_matrix(a: Sequence, b: Sequence | None = None, kind: str = "l1", *, cells: np.ndarray | None = None,
-                    chunk_cells: int = CHUNK_CELLS, progress: Callable[[int, int], None] | None = None) -> np.ndarray:
+                    chunk_cells: int | None = None, progress: Callable[[int, int], None] | None = None,
+                    device: "torch.device | str | None" = None, backend: str = "auto") -> np.ndarray:
     """(len(a), len(b)) float64 distances of kind `kind` (b = a when None); `cells` overrides
-    the common valid cells; `progress(done, total)` is called after each chunk."""
+    the common valid cells; `progress(done, total)` is called after each chunk. `device`
+    (None: the CPU) is where the sums are taken: the CPU's numba kernel, or torch on a CUDA
+    device; `backend="torch"` runs the torch path on the CPU too. `chunk_cells`: cells per
+    chunk (default `CHUNK_CELLS` for numba, from `DEVICE_BYTES` for torch)."""
     transform = _transform(kind)
+    device = torch.device("cpu") if device is None else torch.device(device)
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}: one of {', '.join(BACKENDS)}")
+    if backend == "numba" and device.type != "cpu":
+        raise ValueError(f"backend='numba' runs on the CPU, not {device}; use backend='torch' (or 'auto')")
     b_is_a = b is None
     b = a if b is None else b
     if len(a) == 0 or len(b) == 0:
         raise ValueError(f"a distance matrix needs members in both sets (got {len(a)} and {len(b)})")
-    if chunk_cells < 1:
+    if chunk_cells is not None and chunk_cells < 1:
         raise ValueError(f"chunk_cells must be at least 1, got {chunk_cells}")
     va = [_source(m, f"set a, member {i}") for i, m in enumerate(a)]
     vb = va if b_is_a else [_source(m, f"set b, member {i}") for i, m in enumerate(b)]
+    if backend == "torch" or device.type != "cpu":
+        return _torch_matrix(va, None if b_is_a else vb, kind, cells, chunk_cells, progress, device)
+    chunk_cells = CHUNK_CELLS if chunk_cells is None else chunk_cells
     chosen = cells is not None
     # One pass over the grid: where the caller chose no cells, each chunk's common valid
     # cells are found from the very values read for it, so no member is read twice.
@@ -191,6 +279,94 @@ def distance_matrix(a: Sequence, b: Sequence | None = None, kind: str = "l1", *,
     if b_is_a:
         total = np.triu(total, 1) + np.triu(total, 1).T  # the kernel fills the upper triangle
     return total / (3 * used)
+
+
+# --------------------------------------------------------------------------- the torch path
+
+
+def _on_device(source: CellSource, idx: np.ndarray, idx_t: torch.Tensor, device: torch.device,
+               where: str) -> torch.Tensor:
+    """(3, len(idx)) float values of a member at `idx` on `device` (any float dtype: the
+    caller widens to fp64 there). Tables and representations go straight to the device;
+    any other source is read on the host, as the numba path reads it."""
+    if isinstance(source, (_Array, _Tensor, RepresentationCells)):
+        v = source.on_device(idx_t, device)
+    else:
+        v = torch.from_numpy(np.asarray(source.grid_cells(idx), dtype=np.float64)).to(device)
+    if tuple(v.shape) != (3, len(idx)):
+        raise ValueError(f"{where}: a chunk of {len(idx)} cells came back with shape {tuple(v.shape)}")
+    return v
+
+
+def _column_blocks(x: torch.Tensor, width: int) -> torch.Tensor:
+    """(members, L) as (blocks, members, width), contiguous, the last block padded with zeros
+    (|0 − 0| adds nothing to a sum)."""
+    m, length = x.shape
+    full, rest = divmod(length, width)
+    out = x.new_zeros((full + (rest > 0), m, width))
+    if full:
+        out[:full] = x[:, :full * width].view(m, full, width).transpose(0, 1)
+    if rest:
+        out[full, :, :rest] = x[:, full * width:]
+    return out
+
+
+def _torch_matrix(va: list, vb: list | None, kind: str, cells: np.ndarray | None, chunk_cells: int | None,
+                  progress: Callable[[int, int], None] | None, device: torch.device) -> np.ndarray:
+    """`distance_matrix` in torch on `device` (vb None: va against itself); see the module
+    docstring. The same walk, the same rule for the cells compared and the same transform
+    as the numba path."""
+    members = va if vb is None else va + vb
+    na, nm = len(va), len(members)
+    chosen = cells is not None
+    walk = np.asarray(cells) if chosen else np.flatnonzero(merl.grid_above_horizon().numpy())
+    if chunk_cells is None:
+        chunk_cells = max(1, min(DEVICE_CHUNK_CELLS, DEVICE_BYTES // (nm * 3 * BYTES_PER_VALUE)))
+    width = max(256, COLUMN_BLOCK_BYTES // (8 * nm))
+    group = max(1, SUMS_BYTES // (8 * na * (nm - na if vb is not None else na)))
+    cos = torch.from_numpy(_cos_theta_i()).to(device) if kind == "l1_log_cos" else None
+    names = [f"set a, member {i}" for i in range(na)] + [f"set b, member {j}" for j in range(nm - na)]
+    total = torch.zeros((na, nm - na if vb is not None else na), dtype=torch.float64, device=device)
+    used = torch.zeros((), dtype=torch.int64, device=device)
+    with torch.no_grad():
+        for start in range(0, len(walk), chunk_cells):
+            idx = np.ascontiguousarray(walk[start:start + chunk_cells])
+            idx_t = torch.from_numpy(idx)
+            stack = torch.empty((nm, 3, len(idx)), dtype=torch.float64, device=device)
+            for i, source in enumerate(members):
+                stack[i] = _on_device(source, idx, idx_t, device, names[i])
+            if chosen:
+                bad = ~torch.isfinite(stack).flatten(1).all(dim=1)
+                if bool(bad.any()):
+                    raise ValueError(f"{names[int(bad.nonzero()[0])]}: non-finite values at the grid cells "
+                                     "(exclude and count the member instead)")
+                used += len(idx)
+            else:
+                # a cell counts where every channel of every member is ≥ 0 and finite; the
+                # others are zeroed in every member, so they add nothing to any pair's sum
+                keep = (torch.isfinite(stack) & (stack >= 0)).flatten(0, 1).all(dim=0)
+                stack.masked_fill_(~keep, 0.0)
+                used += keep.sum()
+            if kind == "l1_log_cos":
+                stack.mul_(cos[idx_t.to(device)])
+            if kind != "l1":
+                stack.log1p_()
+            x = stack.view(nm, -1)
+            xa = _column_blocks(x[:na], width)
+            xb = xa if vb is None else _column_blocks(x[na:], width)
+            del stack, x
+            for g in range(0, xa.shape[0], group):  # the per-block sums of a group of column blocks
+                total += torch.cdist(xa[g:g + group], xb[g:g + group], p=1.0).sum(dim=0)
+            del xa, xb
+            if progress is not None:
+                progress(min(start + chunk_cells, len(walk)), len(walk))
+    used = int(used)
+    if used == 0:
+        raise ValueError("no MERL cell is valid in every member of both sets: nothing to compare")
+    out = total.cpu().numpy()
+    if vb is None:
+        out = np.triu(out, 1) + np.triu(out, 1).T  # as the numba path: a zero diagonal, mirrored
+    return out / (3 * used)
 
 
 #: Values per sub-block of the kernel: four members' blocks (a tile: each value of the other

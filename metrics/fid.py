@@ -22,10 +22,18 @@ of the singular values of Aᶜ Bᶜᵀ / √((na − 1)(nb − 1)) (centred feat
 problem, instead of a 2048 × 2048 matrix square root that is slow and loses digits on
 singular matrices. `frechet_distance` is the standard moment form (scipy's `sqrtm`).
 FID is biased upward for small sets: compare figures only at equal set sizes.
+
+Devices: `device=` (None: the CPU) is where the network extracts features. The input is
+prepared on the CPU (tone map, quantisation and resize, fp64, then float32), so a GPU sees
+the very bits the CPU would; there the network runs in fp32 with TF32 off and cuDNN's
+deterministic algorithms, so features agree with the CPU's to fp32 rounding (different
+convolution algorithms sum in other orders). The Fréchet distance itself is always
+computed on the CPU in fp64 (numpy / scipy).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib.util
 import math
@@ -51,6 +59,8 @@ INPUT_SIZE = 299
 FEATURES = 2048
 #: Images per forward pass: ~40 MB of activations per image at the widest layer.
 BATCH = 16
+#: The same on a CUDA device (2.5 GB of activations).
+DEVICE_BATCH = 64
 #: Torch threads for the network by default: on two busy cores a second thread spins more
 #: than it helps (measured 2.5–12x slower); on an idle many-core machine pass threads=None.
 THREADS = 1
@@ -101,10 +111,28 @@ def _load(path: str, verify: bool) -> torch.jit.ScriptModule:
     return model.eval()
 
 
-def load_inception(path: str | Path | None = None, *, verify: bool = True) -> torch.jit.ScriptModule:
-    """The InceptionV3 feature network (cached per process), from `path` or the installed
-    package; `verify` checks it is the standard file. FidUnavailable says why it is not there."""
-    return _load(str(Path(path) if path is not None else default_model_path()), verify)
+@lru_cache(maxsize=2)
+def _load_on(path: str, verify: bool, device: torch.device) -> torch.jit.ScriptModule:
+    """The network on `device`: checked and loaded once on the CPU (`_load`), then loaded
+    again straight onto the device (the CPU copy stays where it is for CPU callers)."""
+    _load(path, verify)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*torch.jit.load.*", category=DeprecationWarning)
+        return torch.jit.load(path, map_location=device).eval()
+
+
+def load_inception(path: str | Path | None = None, *, verify: bool = True,
+                   device: "torch.device | str | None" = None) -> torch.jit.ScriptModule:
+    """The InceptionV3 feature network (cached per process and device), from `path` or the
+    installed package, on `device` (None: the CPU); `verify` checks it is the standard file.
+    FidUnavailable says why it is not there."""
+    path = str(Path(path) if path is not None else default_model_path())
+    device = torch.device("cpu") if device is None else torch.device(device)
+    if device.type == "cpu":
+        return _load(path, verify)
+    if device.type == "cuda" and device.index is None:
+        device = torch.device("cuda", torch.cuda.current_device())
+    return _load_on(path, verify, device)
 
 
 # --------------------------------------------------------------------------- input
@@ -143,26 +171,45 @@ def _positive(value, name: str) -> None:
         raise ValueError(f"{name} must be a positive integer, got {value!r}")
 
 
-def inception_features(images, *, exposure: float = 0.0, quantize: bool = True, batch_size: int = BATCH,
+@contextlib.contextmanager
+def _exact_fp32(device: torch.device):
+    """On a CUDA device: cuDNN in full fp32 (TF32 off, for convolutions and RNNs alike, so the
+    legacy and the per-operator TF32 flags agree) with deterministic algorithms, so features
+    are fp32 figures, the same from run to run; the previous settings come back after. Nothing
+    on the CPU."""
+    if device.type != "cuda":
+        yield
+        return
+    with warnings.catch_warnings():  # torch ≥ 2.9 says the legacy TF32 switch will go; it still works
+        warnings.filterwarnings("ignore", message=".*TF32.*", category=UserWarning)
+        with torch.backends.cudnn.flags(enabled=True, benchmark=False, deterministic=True, allow_tf32=False):
+            yield
+
+
+def inception_features(images, *, exposure: float = 0.0, quantize: bool = True, batch_size: int | None = None,
                        threads: int | None = THREADS, model_path: str | Path | None = None,
-                       progress: Progress | None = None) -> np.ndarray:
+                       progress: Progress | None = None, device: "torch.device | str | None" = None) -> np.ndarray:
     """(N, 2048) float64 pool features of images (N, H, W, 3) of linear radiance, in batches
-    of `batch_size` on `threads` torch threads (None: the caller's setting);
+    of `batch_size` (None: `BATCH` on the CPU, `DEVICE_BATCH` on a CUDA device) on `threads`
+    torch threads (None: the caller's setting), the network on `device` (None: the CPU);
     `progress(done, total)` counts images."""
     x = checked_images(images, "images")
+    device = torch.device("cpu") if device is None else torch.device(device)
+    if batch_size is None:
+        batch_size = BATCH if device.type == "cpu" else DEVICE_BATCH
     _positive(batch_size, "batch_size")
     if threads is not None:
         _positive(threads, "threads")
-    model = load_inception(model_path)
+    model = load_inception(model_path, device=device)
     out = np.empty((x.shape[0], FEATURES), dtype=np.float64)
-    with torch.inference_mode(), torch_threads(threads):
+    with torch.inference_mode(), torch_threads(threads), _exact_fp32(device):
         for start in range(0, x.shape[0], batch_size):
             chunk = inception_input(x[start:start + batch_size], exposure=exposure, quantize=quantize)
-            f = model(chunk)
+            f = model(chunk if device.type == "cpu" else chunk.to(device))
             if f.shape != (chunk.shape[0], FEATURES):
                 raise FidUnavailable(f"FID is unavailable: the network returned features of shape {tuple(f.shape)}, "
                                      f"expected ({chunk.shape[0]}, {FEATURES})")
-            out[start:start + chunk.shape[0]] = f.double().numpy()
+            out[start:start + chunk.shape[0]] = f.double().cpu().numpy()
             if progress is not None:
                 progress(start + chunk.shape[0], x.shape[0])
     if not np.isfinite(out).all():
@@ -240,16 +287,18 @@ def frechet_distance_features(features_a, features_b) -> float:
     return float(diff @ diff + tr_a + tr_b - 2.0 * tr_sqrt)
 
 
-def fid(images_a, images_b, *, exposure: float = 0.0, quantize: bool = True, batch_size: int = BATCH,
+def fid(images_a, images_b, *, exposure: float = 0.0, quantize: bool = True, batch_size: int | None = None,
         threads: int | None = THREADS, model_path: str | Path | None = None,
-        progress: Progress | None = None) -> float:
+        progress: Progress | None = None, device: "torch.device | str | None" = None) -> float:
     """FID between two image sets (N ≥ 2, H, W, 3) of linear radiance (sizes may differ);
-    `progress(done, total)` counts the images of both sets."""
+    `progress(done, total)` counts the images of both sets; `device` (None: the CPU) is
+    where the network extracts the features (the distance is fp64 on the CPU)."""
     a, b = checked_images(images_a, "images_a"), checked_images(images_b, "images_b")
     for name, x in (("images_a", a), ("images_b", b)):
         if x.shape[0] < 2:
             raise ValueError(f"{name} has {x.shape[0]} image(s): FID needs at least 2 per set (a covariance)")
-    keys = dict(exposure=exposure, quantize=quantize, batch_size=batch_size, threads=threads, model_path=model_path)
+    keys = dict(exposure=exposure, quantize=quantize, batch_size=batch_size, threads=threads, model_path=model_path,
+                device=device)
     total = a.shape[0] + b.shape[0]
     fa = inception_features(a, **keys, progress=None if progress is None else lambda d, n: progress(d, total))
     fb = inception_features(b, **keys,

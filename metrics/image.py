@@ -3,6 +3,8 @@
 Each concrete class fixes a metric and a space ("ldr" or "hdr", see `image_functional`), so
 the registry builds it without arguments and its unit is exact; keyword arguments are the
 functional metric's options, e.g. `PSNRHDR(data_range=4.0)` or `FLIPLDR(exposure=1.0)`.
+`device=` (e.g. `SSIMLDR(device="cuda")`) is where MSE, RMSE, PSNR and SSIM compute (see
+`image_functional`); FLIP is numpy and always computes on the CPU, whatever `device` says.
 """
 
 from __future__ import annotations
@@ -21,16 +23,21 @@ class ImageMetric(Metric):
     fn: ClassVar[Callable]
     space: ClassVar[str]
     domain: ClassVar[str] = "image"
+    #: True: `fn` is torch and takes `device`; False (FLIP): it computes on the CPU.
+    torch_device: ClassVar[bool] = True
 
-    def __init__(self, **options: Any):
+    def __init__(self, *, device: "torch.device | str | None" = None, **options: Any):
         if not hasattr(type(self), "space"):
             raise TypeError(f"{type(self).__name__} has no space; use its LDR or HDR subclass")
         self.options = options
+        #: where the metric computes (None: where the images lie; FLIP: always the CPU)
+        self.device = None if device is None else torch.device(device)
         super().__init__()
 
     def update(self, pred: torch.Tensor, target: torch.Tensor) -> None:  # type: ignore[override]
         """Add one image (H, W, 3) or a batch (N, H, W, 3) of images."""
-        values = type(self).fn(pred, target, space=self.space, reduction="none", **self.options)
+        where = {"device": self.device} if self.device is not None and type(self).torch_device else {}
+        values = type(self).fn(pred, target, space=self.space, reduction="none", **where, **self.options)
         values = values.reshape(-1)
         self._sum += float(values.sum())
         self._count += values.numel()
@@ -59,6 +66,7 @@ class SSIM(ImageMetric):
 class FLIP(ImageMetric):
     fn = staticmethod(IF.flip)
     unit = "1"
+    torch_device = False  # flip-evaluator is numpy: FLIP runs on the CPU
 
 
 # The (metric, space) pairs, one registered spec each. LDR values are display code values in [0, 1]

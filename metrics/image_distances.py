@@ -26,6 +26,11 @@ shortcut, so an image against itself is exactly 0); SSIM computes each image's l
 and variance once, and per pair only the blurred product, in blocks of pairs, its blur a
 matrix product. A set against itself is computed once per unordered pair (in blocks on and
 above the diagonal), mirrored. The loops run on one torch thread (`brdfbench.threads`).
+
+`device=` (None: the CPU) is where the matrices are computed: on a CUDA device the images
+move there once (fp64) and the same arithmetic runs in larger blocks (`DEVICE_ROWS`,
+`DEVICE_CHUNK_VALUES`); entries agree with the CPU's to rounding. Rendering stays on the
+CPU (Mitsuba), as does FLIP (`image_functional.flip`, numpy), which no matrix here uses.
 """
 
 from __future__ import annotations
@@ -60,6 +65,12 @@ CHUNK_VALUES = 1 << 17
 #: Rows per block of an RMSE / PSNR matrix: small blocks let a set against itself skip the
 #: lower triangle.
 ROWS = 16
+#: The same on a CUDA device: larger blocks, fewer kernel launches (about 4 stacks of
+#: DEVICE_CHUNK_VALUES fp64 values are live at once: 512 MiB).
+DEVICE_CHUNK_VALUES = 1 << 24
+DEVICE_ROWS = 256
+#: Tests set this to run the device path's block sizes on the CPU, where CI checks them.
+_DEVICE_PATH_ON_CPU = False
 
 Progress = Callable[[int, int], None]
 
@@ -213,18 +224,18 @@ def _squared_sums(xa: torch.Tensor, xb: torch.Tensor) -> torch.Tensor:
 
 
 def _pixel_matrix(kind: str, xa: torch.Tensor, xb: torch.Tensor | None, data_range: float,
-                  progress: Progress | None) -> torch.Tensor:
-    """RMSE or −PSNR (capped as `image_functional.psnr`: `PSNR_MAX_DB`) of every pair, in
-    blocks of `ROWS` rows (xb None: xa against itself, each row block against the columns
-    from its first row on, mirrored)."""
+                  progress: Progress | None, block_rows: int = ROWS) -> torch.Tensor:
+    """RMSE or −PSNR (capped as `image_functional.psnr`: `PSNR_MAX_DB`) of every pair, on
+    xa's device, in blocks of `block_rows` rows (xb None: xa against itself, each row block
+    against the columns from its first row on, mirrored)."""
     symmetric = xb is None
     xb = xa if symmetric else xb
     n_values = xa[0].numel()
     floor = data_range**2 * 10.0 ** (-F.PSNR_MAX_DB / 10.0)
-    out = torch.empty((xa.shape[0], xb.shape[0]), dtype=torch.float64)
-    starts = range(0, xa.shape[0], ROWS)
+    out = torch.empty((xa.shape[0], xb.shape[0]), dtype=torch.float64, device=xa.device)
+    starts = range(0, xa.shape[0], block_rows)
     for done, i in enumerate(starts, 1):
-        rows, cols = slice(i, i + ROWS), slice(i if symmetric else 0, None)
+        rows, cols = slice(i, i + block_rows), slice(i if symmetric else 0, None)
         mse = _squared_sums(xa[rows], xb[cols]) / n_values
         d = mse.sqrt() if kind == "rmse" else -10.0 * torch.log10(data_range**2 / torch.clamp_min(mse, floor))
         out[rows, cols] = d
@@ -249,9 +260,17 @@ def blur_matrix(n: int) -> torch.Tensor:
     return g
 
 
+@lru_cache(maxsize=8)
+def _blur_matrix_on(n: int, device: torch.device) -> torch.Tensor:
+    """`blur_matrix(n)` on `device` (one copy per device and size)."""
+    return blur_matrix(n).to(device)
+
+
 def _blur(x: torch.Tensor) -> torch.Tensor:
-    """The SSIM blur of images (..., H, W)."""
-    return blur_matrix(x.shape[-2]) @ (x @ blur_matrix(x.shape[-1]).T)
+    """The SSIM blur of images (..., H, W), on their device."""
+    if x.device.type == "cpu":
+        return blur_matrix(x.shape[-2]) @ (x @ blur_matrix(x.shape[-1]).T)
+    return _blur_matrix_on(x.shape[-2], x.device) @ (x @ _blur_matrix_on(x.shape[-1], x.device).T)
 
 
 @dataclass(frozen=True)
@@ -290,15 +309,15 @@ def _ssim_block(a: _SsimStats, b: _SsimStats, ra: slice, rb: slice, data_range: 
 
 
 def _ssim_matrix(xa: torch.Tensor, xb: torch.Tensor | None, data_range: float, side: int | None,
-                 progress: Progress | None) -> torch.Tensor:
-    """−SSIM of every pair, in blocks of side × side pairs (default: about `CHUNK_VALUES`
-    values per stack; xb None: xa against itself, upper blocks only, mirrored)."""
-    side = side or max(1, math.isqrt(max(1, CHUNK_VALUES // xa[0].numel())))
+                 progress: Progress | None, chunk_values: int = CHUNK_VALUES) -> torch.Tensor:
+    """−SSIM of every pair, on xa's device, in blocks of side × side pairs (default: about
+    `chunk_values` values per stack; xb None: xa against itself, upper blocks only, mirrored)."""
+    side = side or max(1, math.isqrt(max(1, chunk_values // xa[0].numel())))
     a = _SsimStats.of(xa, data_range)
     b = a if xb is None else _SsimStats.of(xb, data_range)
     na, nb = a.x.shape[0], b.x.shape[0]
     blocks = [(i, j) for i in range(0, na, side) for j in range(i if xb is None else 0, nb, side)]
-    out = torch.empty((na, nb), dtype=torch.float64)
+    out = torch.empty((na, nb), dtype=torch.float64, device=xa.device)
     for done, (i, j) in enumerate(blocks, 1):
         ra, rb = slice(i, min(i + side, na)), slice(j, min(j + side, nb))
         d = _ssim_block(a, b, ra, rb, data_range)
@@ -314,11 +333,12 @@ def _ssim_matrix(xa: torch.Tensor, xb: torch.Tensor | None, data_range: float, s
 
 def image_distance_matrix(images_a, images_b=None, kind: str = "rmse", *, space: str = "ldr", exposure: float = 0.0,
                           data_range: float | None = None, block: int | None = None,
-                          progress: Progress | None = None) -> np.ndarray:
+                          progress: Progress | None = None, device: "torch.device | str | None" = None) -> np.ndarray:
     """(len(a), len(b)) float64 distances of kind `kind` between image sets (N, H, W, 3) of
     linear radiance (b = a when None: each unordered pair once, mirrored); `data_range`
     overrides the common one in space "hdr"; `block`: SSIM's pairs per block side (default
-    from `CHUNK_VALUES`); `progress(done, total)` counts blocks of pairs."""
+    from `CHUNK_VALUES`, or `DEVICE_CHUNK_VALUES` on a CUDA device); `progress(done, total)`
+    counts blocks of pairs; `device` (None: the CPU) is where the matrix is computed."""
     _check_kind(kind, space)
     if block is not None and (isinstance(block, bool) or not isinstance(block, int) or block < 1):
         raise ValueError(f"block must be a positive integer, got {block!r}")
@@ -331,10 +351,18 @@ def image_distance_matrix(images_a, images_b=None, kind: str = "rmse", *, space:
     if kind == "neg_ssim" and min(h, w) < F.SSIM_WINDOW:
         raise ValueError(f"neg_ssim needs images of at least {F.SSIM_WINDOW}×{F.SSIM_WINDOW} (the Gaussian window), "
                          f"got {h}×{w}")
+    device = torch.device("cpu") if device is None else torch.device(device)
+    big = device.type != "cpu" or _DEVICE_PATH_ON_CPU  # the device path's block sizes
+    if device.type != "cpu":
+        a = a.to(device)
+        b = a if symmetric else b.to(device)
     with torch_threads(1):
         xa = to_metric_space(a, kind, space, exposure, "images_a")
         xb = xa if symmetric else to_metric_space(b, kind, space, exposure, "images_b")
         L = _common_range(space, data_range, xa, xb)
         if kind == "neg_ssim":
-            return _ssim_matrix(xa, None if symmetric else xb, L, block, progress).numpy()
-        return _pixel_matrix(kind, xa, None if symmetric else xb, L, progress).numpy()
+            out = _ssim_matrix(xa, None if symmetric else xb, L, block, progress,
+                               DEVICE_CHUNK_VALUES if big else CHUNK_VALUES)
+        else:
+            out = _pixel_matrix(kind, xa, None if symmetric else xb, L, progress, DEVICE_ROWS if big else ROWS)
+        return out.cpu().numpy()

@@ -12,6 +12,11 @@ Every metric runs in one of two spaces, chosen explicitly with `space=`:
 A batch reduces to the mean of its per-image values (`reduction="none"` keeps them), so a
 set of images scores the same in one call or in many. PSNR is capped at `max_db` (100 dB by
 default) so that one exact image does not make a mean over images infinite.
+
+Devices: MSE, RMSE, PSNR and SSIM are torch and take `device=` (default: where `pred` lies;
+a CUDA device computes there in fp64, and the figures agree with the CPU's to rounding);
+their values (and maps) come back on `pred`'s device. FLIP is the `flip-evaluator` package
+(numpy, on the CPU): it takes no device and always runs on the CPU.
 """
 
 from __future__ import annotations
@@ -34,8 +39,10 @@ _DARK = 1e-30
 # --------------------------------------------------------------------------- input checks
 
 
-def _batched(name: str, pred: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, bool]:
-    """Validated float64 (N, H, W, 3) copies of pred and target, and whether the input was one image."""
+def _batched(name: str, pred: torch.Tensor, target: torch.Tensor,
+             device: "torch.device | str | None" = None) -> tuple[torch.Tensor, torch.Tensor, bool]:
+    """Validated float64 (N, H, W, 3) copies of pred and target on `device` (None: pred's), and
+    whether the input was one image."""
     for label, x in (("pred", pred), ("target", target)):
         if not isinstance(x, torch.Tensor) or not x.is_floating_point():
             got = f"dtype {x.dtype}" if isinstance(x, torch.Tensor) else type(x).__name__
@@ -51,7 +58,8 @@ def _batched(name: str, pred: torch.Tensor, target: torch.Tensor) -> tuple[torch
         if bad.any():
             raise ValueError(f"{name}: {label} has {int(bad.sum())} non-finite (NaN/Inf) values")
     single = pred.ndim == 3
-    p, t = (x.detach().to(torch.float64) for x in (pred, target))
+    where = pred.device if device is None else torch.device(device)
+    p, t = (x.detach().to(device=where, dtype=torch.float64) for x in (pred, target))
     return (p[None], t[None], single) if single else (p, t, single)
 
 
@@ -68,8 +76,8 @@ def _nonnegative(name: str, **images: torch.Tensor) -> None:
             raise ValueError(f"{name} in HDR space needs non-negative radiance; {label} has minimum {low:g}")
 
 
-def _in_space(name: str, pred, target, space: str, exposure: float):
-    p, t, single = _batched(name, pred, target)
+def _in_space(name: str, pred, target, space: str, exposure: float, device=None):
+    p, t, single = _batched(name, pred, target, device)
     if _space(name, space) == "ldr":
         p, t = tonemap(p, exposure), tonemap(t, exposure)
     return p, t, single
@@ -83,14 +91,19 @@ def _reduce(values: torch.Tensor, single: bool, reduction: str) -> torch.Tensor:
     raise ValueError(f"unknown reduction {reduction!r}; expected 'mean' or 'none'")
 
 
+def _home(x: torch.Tensor, pred) -> torch.Tensor:
+    """A result back on `pred`'s device (a no-op where it was computed there)."""
+    return x if x.device == pred.device else x.to(pred.device)
+
+
 def _data_range(name: str, t: torch.Tensor, space: str, data_range: float | None) -> torch.Tensor:
     """(N,) data range per image: given, 1 for LDR, the target's max for HDR."""
     if data_range is not None:
         if not (math.isfinite(data_range) and data_range > 0):
             raise ValueError(f"{name}: data_range must be a positive finite number, got {data_range!r}")
-        return torch.full((t.shape[0],), float(data_range), dtype=torch.float64)
+        return torch.full((t.shape[0],), float(data_range), dtype=torch.float64, device=t.device)
     if space == "ldr":
-        return torch.ones(t.shape[0], dtype=torch.float64)
+        return torch.ones(t.shape[0], dtype=torch.float64, device=t.device)
     peak = t.flatten(1).amax(dim=1)
     if (peak <= 0).any():
         i = int(torch.nonzero(peak <= 0)[0])
@@ -106,29 +119,31 @@ def _mse_per_image(p: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
     return ((p - t) ** 2).flatten(1).mean(dim=1)
 
 
-def mse(pred, target, *, space: str, exposure: float = 0.0, reduction: str = "mean") -> torch.Tensor:
-    """Mean squared error over pixels and channels."""
-    p, t, single = _in_space("mse", pred, target, space, exposure)
-    return _reduce(_mse_per_image(p, t), single, reduction)
+def mse(pred, target, *, space: str, exposure: float = 0.0, reduction: str = "mean",
+        device: "torch.device | str | None" = None) -> torch.Tensor:
+    """Mean squared error over pixels and channels (computed on `device`: see the module docstring)."""
+    p, t, single = _in_space("mse", pred, target, space, exposure, device)
+    return _home(_reduce(_mse_per_image(p, t), single, reduction), pred)
 
 
-def rmse(pred, target, *, space: str, exposure: float = 0.0, reduction: str = "mean") -> torch.Tensor:
+def rmse(pred, target, *, space: str, exposure: float = 0.0, reduction: str = "mean",
+         device: "torch.device | str | None" = None) -> torch.Tensor:
     """Root mean squared error of each image (a batch averages the per-image RMSEs)."""
-    p, t, single = _in_space("rmse", pred, target, space, exposure)
-    return _reduce(_mse_per_image(p, t).sqrt(), single, reduction)
+    p, t, single = _in_space("rmse", pred, target, space, exposure, device)
+    return _home(_reduce(_mse_per_image(p, t).sqrt(), single, reduction), pred)
 
 
 def psnr(pred, target, *, space: str, exposure: float = 0.0, data_range: float | None = None,
-         max_db: float = PSNR_MAX_DB, reduction: str = "mean") -> torch.Tensor:
+         max_db: float = PSNR_MAX_DB, reduction: str = "mean", device: "torch.device | str | None" = None) -> torch.Tensor:
     """10 log10(L² / MSE) in dB, with L = `data_range` (default: 1 for LDR, the target's max for HDR).
 
     Capped at `max_db`: identical images score `max_db`, not infinity.
     """
-    p, t, single = _in_space("psnr", pred, target, space, exposure)
+    p, t, single = _in_space("psnr", pred, target, space, exposure, device)
     peak = _data_range("psnr", t, space, data_range)
     floor = peak**2 * 10.0 ** (-max_db / 10.0)
     values = 10.0 * torch.log10(peak**2 / torch.maximum(_mse_per_image(p, t), floor))
-    return _reduce(values, single, reduction)
+    return _home(_reduce(values, single, reduction), pred)
 
 
 # --------------------------------------------------------------------------- SSIM
@@ -148,7 +163,7 @@ def _mirror_index(n: int, r: int) -> torch.Tensor:
 
 def _blur_axis(x: torch.Tensor, window: torch.Tensor, dim: int) -> torch.Tensor:
     n, r = x.shape[dim], window.numel() // 2
-    padded = x.index_select(dim, _mirror_index(n, r))
+    padded = x.index_select(dim, _mirror_index(n, r).to(x.device))
     out = window[0] * padded.narrow(dim, 0, n)
     for k in range(1, window.numel()):
         out = out + window[k] * padded.narrow(dim, k, n)
@@ -168,7 +183,7 @@ def _blur(x: torch.Tensor, window: torch.Tensor) -> torch.Tensor:
 def ssim_map(p: torch.Tensor, t: torch.Tensor, data_range: torch.Tensor) -> torch.Tensor:
     """Per-pixel SSIM (N, H, W) of float64 images (N, H, W, C): each channel separately, then averaged."""
     n, h, w, c = p.shape
-    window = _gaussian_window()
+    window = _gaussian_window().to(p.device)
     x = p.permute(0, 3, 1, 2).reshape(n * c, h, w)
     y = t.permute(0, 3, 1, 2).reshape(n * c, h, w)
     mu_x, mu_y = _blur(x, window), _blur(y, window)
@@ -182,15 +197,16 @@ def ssim_map(p: torch.Tensor, t: torch.Tensor, data_range: torch.Tensor) -> torc
 
 
 def ssim(pred, target, *, space: str, exposure: float = 0.0, data_range: float | None = None,
-         return_map: bool = False, reduction: str = "mean"):
+         return_map: bool = False, reduction: str = "mean", device: "torch.device | str | None" = None):
     """Structural similarity (Wang et al. 2004): Gaussian window 11, σ = 1.5, K1 = 0.01, K2 = 0.03.
 
     Computed on each RGB channel and averaged; the window is mirror-padded at the borders so
     the map covers every pixel. HDR space compares log(1 + radiance), with data range the
     target's max of log(1 + radiance) unless given. `return_map=True` also returns the
-    per-pixel map, (H, W) for one image or (N, H, W) for a batch.
+    per-pixel map, (H, W) for one image or (N, H, W) for a batch. Computed on `device`
+    (default: pred's); values and map come back on pred's device.
     """
-    p, t, single = _batched("ssim", pred, target)
+    p, t, single = _batched("ssim", pred, target, device)
     if p.shape[1] < SSIM_WINDOW or p.shape[2] < SSIM_WINDOW:
         raise ValueError(f"ssim: images must be at least {SSIM_WINDOW}×{SSIM_WINDOW} (the Gaussian window), "
                          f"got {tuple(pred.shape)}")
@@ -200,8 +216,8 @@ def ssim(pred, target, *, space: str, exposure: float = 0.0, data_range: float |
         _nonnegative("ssim", pred=p, target=t)
         p, t = torch.log1p(p), torch.log1p(t)
     smap = ssim_map(p, t, _data_range("ssim", t, space, data_range))
-    value = _reduce(smap.flatten(1).mean(dim=1), single, reduction)
-    return (value, smap[0] if single else smap) if return_map else value
+    value = _home(_reduce(smap.flatten(1).mean(dim=1), single, reduction), pred)
+    return (value, _home(smap[0] if single else smap, pred)) if return_map else value
 
 
 # --------------------------------------------------------------------------- FLIP
@@ -241,10 +257,11 @@ def flip(pred, target, *, space: str, exposure: float = 0.0, ppd: float = FLIP_P
     `ppd` is the pixels per degree of visual angle (67: a 0.7 m wide 4K monitor at 0.7 m).
     The target is FLIP's reference. `return_map=True` also returns the error map.
     The library runs OpenMP threads; on an oversubscribed machine OMP_NUM_THREADS=1 is faster.
+    It computes on the CPU (numpy) whatever device the images are on: it takes no `device`.
     """
     if not (isinstance(ppd, (int, float)) and math.isfinite(ppd) and ppd > 0):
         raise ValueError(f"flip: ppd (pixels per degree) must be a positive finite number, got {ppd!r}")
-    p, t, single = _batched("flip", pred, target)
+    p, t, single = _batched("flip", pred, target, "cpu")  # the package is numpy: FLIP runs on the CPU
     hdr = _space("flip", space) == "hdr"
     if hdr:
         _nonnegative("flip", pred=p, target=t)
@@ -255,5 +272,5 @@ def flip(pred, target, *, space: str, exposure: float = 0.0, ppd: float = FLIP_P
         raise ValueError("flip: radiance beyond the float32 range (FLIP computes in float32)")
     maps = torch.from_numpy(np.stack([_flip_one(np.ascontiguousarray(t32[i]), np.ascontiguousarray(p32[i]), hdr,
                                                 float(ppd)) for i in range(p.shape[0])]))
-    value = _reduce(maps.double().flatten(1).mean(dim=1), single, reduction)
-    return (value, maps[0] if single else maps) if return_map else value
+    value = _home(_reduce(maps.double().flatten(1).mean(dim=1), single, reduction), pred)
+    return (value, _home(maps[0] if single else maps, pred)) if return_map else value

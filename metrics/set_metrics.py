@@ -4,7 +4,9 @@
 (`compute(d_rr, d_ss, d_rs)`; MMD, COV, 1-NNA of `distributional`); `domain = "image_set"`:
 computed from the two sets' rendered images (`compute(images_r, images_s)`; FID). The
 generation harness calls every set metric of `harness.metrics` through these classes, so a
-third party registers another the same way.
+third party registers another the same way. A metric whose class sets `uses_device = True`
+is also given the job's device (`compute(..., device=...)`, a torch.device; the CPU where
+the job names none) for its own heavy work (FID: the network's feature extraction).
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ class SetMetric:
     domain: ClassVar[str] = "set"
     unit: ClassVar[str] = ""
     higher_is_better: ClassVar[bool] = False
+    #: True: `compute` takes `device=` (the job's device) for its own work.
+    uses_device: ClassVar[bool] = False
 
     def unit_for(self, distance_unit: str) -> str:
         return self.unit
@@ -65,8 +69,11 @@ class FID:
     domain: ClassVar[str] = "image_set"
     unit: ClassVar[str] = "1"
     higher_is_better: ClassVar[bool] = False
+    uses_device: ClassVar[bool] = True
 
-    def compute(self, images_r, images_s) -> float:
+    def compute(self, images_r, images_s, *, device=None) -> float:
+        """`device` (None: the CPU): where InceptionV3 extracts the features; the distance
+        itself is fp64 on the CPU."""
         from .fid import fid
 
-        return float(fid(images_r, images_s))
+        return float(fid(images_r, images_s, device=device))

@@ -65,6 +65,9 @@ class AnalyticBRDF(Representation):
     """
 
     tags: ClassVar[frozenset[str]] = TAGS
+    #: evaluates on a GPU; the fit (bounded L-BFGS-B through scipy on 2^15 cells) runs on the
+    #: CPU wherever the model is, and its coefficients then move to the model's device
+    devices = frozenset({"cpu", "cuda"})
     NAME: ClassVar[str] = "analytic"
     COEFFS: ClassVar[tuple[Coefficient, ...]] = (_KD, _KS)
     FLOPS: ClassVar[int] = 0
@@ -127,9 +130,13 @@ class AnalyticBRDF(Representation):
 
         result = fit_analytic(self, target, seed=seed)
         self.set_coefficients(**result.coefficients)
+        self._move(self.device)
         self.fit_loss = result.loss
         self.fit_info = result.info
         return self
+
+    def _move(self, device) -> None:
+        self.coeffs = {k: v.to(device) for k, v in self.coeffs.items()}
 
     # -- persistence and cost --------------------------------------------------------
     def state_dict(self) -> dict[str, Tensor]:

@@ -35,6 +35,8 @@ def _channel_medians(values: np.ndarray, weights: np.ndarray) -> list[float]:
 
 class Lambert(Representation):
     tags = frozenset({"isotropic", "reciprocal", "fittable", "analytic"})
+    #: evaluates on a GPU; the fit (a weighted median) runs on the CPU wherever the model is
+    devices = frozenset({"cpu", "cuda"})
 
     def __init__(self):
         super().__init__()
@@ -46,7 +48,11 @@ class Lambert(Representation):
         weights = (wi * wo)[valid]
         values = target.table.values.reshape(3, -1)[:, valid]
         self.albedo = torch.tensor([math.pi * m for m in _channel_medians(values, weights)], dtype=torch.float64)
+        self._move(self.device)
         return self
+
+    def _move(self, device):
+        self.albedo = self.albedo.to(device)
 
     def _eval(self, wi, wo):
         return (self.albedo / math.pi).to(wi.dtype).expand(wi.shape[0], 3).clone()

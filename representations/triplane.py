@@ -6,10 +6,16 @@ Isotropic and reciprocal by construction (the half texture is radial; the differ
 texture is read with φd mod π). Fitted `batch_materials` materials at a time; a material's
 initial state is drawn from the run seed and its name, so its fit does not depend on its
 batch-mates.
+
+Both models run on the CPU or a CUDA device (`to(device)`): they fit there, the fitted
+models live there, and `eval` takes inputs there. A recipe too long for a CPU (the
+published one of Timonen et al.: 100k steps of 2^18 pairs) is refused when a fit would
+start on the CPU, with its estimated time, unless `allow_slow_cpu` is set.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar, Sequence
 
 import torch
@@ -24,6 +30,22 @@ from .nbrdf import material_seed
 DEFAULTS = {"h_res": 64, "d_res": (32, 32), "channels": (8, 8), "hidden": (16,)}
 #: A texture larger than this many floats per material is refused before allocation.
 MAX_TEXTURE_FLOATS = 64 * 2**20
+#: The training arithmetic assumed of a CPU in this fitter, for the estimate behind the
+#: refusal below (an order of magnitude: texture gathers and 16-wide matrices run far below
+#: a CPU's peak).
+CPU_TRAIN_FLOP_RATE = 1e9
+#: A fit estimated to take longer than this per material on the CPU is refused unless
+#: `allow_slow_cpu` is set (the default recipe is estimated at under a minute).
+CPU_LIMIT_S = 3600.0
+#: On a GPU, materials fitted together at least (while a step holds at most
+#: GPU_PAIRS_PER_STEP material-pairs): at the default minibatch a step is small kernels
+#: whose launches, not their work, set its time (as for nbrdf), and a fit does not depend on
+#: its batch-mates, so only speed changes. At the published recipe's 2^18 pairs: 16.
+GPU_BATCH_MATERIALS = 128
+GPU_PAIRS_PER_STEP = 2**22
+
+_RECIPE_KEYS = ("epochs", "batch_size", "n_samples", "lr", "texture_lr", "loss", "beta1", "ema", "precondition",
+                "init_scale", "iterations", "resample", "sampling", "schedule", "lr_decay", "lr_decay_every")
 
 
 def _ints(owner: str, name: str, value, length: int | None, minimum: int) -> tuple[int, ...]:
@@ -43,6 +65,7 @@ class Tripleplane(Representation):
 
     tags: ClassVar[frozenset[str]] = frozenset({"isotropic", "reciprocal", "fittable", "neural"})
     plugin_name: ClassVar[str] = "tripleplane"
+    devices: ClassVar[frozenset[str]] = frozenset({"cpu", "cuda"})
 
     def __init__(self, h_res: int = DEFAULTS["h_res"], d_res: Sequence[int] = DEFAULTS["d_res"],
                  channels: Sequence[int] = DEFAULTS["channels"], hidden: Sequence[int] = DEFAULTS["hidden"],
@@ -50,11 +73,17 @@ class Tripleplane(Representation):
                  n_samples: int = tf.Recipe.n_samples, lr: float = tf.Recipe.lr,
                  texture_lr: float = tf.Recipe.texture_lr, loss: str = tf.Recipe.loss, beta1: float = tf.Recipe.beta1,
                  ema: float | None = tf.Recipe.ema, precondition: float = tf.Recipe.precondition,
-                 init_scale: float = tf.Recipe.init_scale, batch_materials: int = 16):
+                 init_scale: float = tf.Recipe.init_scale, batch_materials: int = 16,
+                 iterations: int | None = tf.Recipe.iterations, resample: bool = tf.Recipe.resample,
+                 sampling: str = tf.Recipe.sampling, schedule: str = tf.Recipe.schedule,
+                 lr_decay: float = tf.Recipe.lr_decay, lr_decay_every: int = tf.Recipe.lr_decay_every,
+                 allow_slow_cpu: bool = False):
         self._configure(dict(h_res=h_res, d_res=d_res, channels=channels, hidden=hidden, epochs=epochs,
                              batch_size=batch_size, n_samples=n_samples, lr=lr, texture_lr=texture_lr, loss=loss,
                              beta1=beta1, ema=ema, precondition=precondition, init_scale=init_scale,
-                             batch_materials=batch_materials))
+                             batch_materials=batch_materials, iterations=iterations, resample=resample,
+                             sampling=sampling, schedule=schedule, lr_decay=lr_decay, lr_decay_every=lr_decay_every,
+                             allow_slow_cpu=allow_slow_cpu))
 
     def _configure(self, params: dict, latent: int = 0, warps: int = 0) -> None:
         """Check `params` (the constructor's keywords) and build the shape and the recipe."""
@@ -72,18 +101,50 @@ class Tripleplane(Representation):
         batch_materials = params["batch_materials"]
         if not isinstance(batch_materials, int) or isinstance(batch_materials, bool) or batch_materials < 1:
             raise ConfigError(f"{name}: batch_materials={batch_materials!r} must be a positive integer")
-        recipe_keys = ("epochs", "batch_size", "n_samples", "lr", "texture_lr", "loss", "beta1", "ema",
-                       "precondition", "init_scale")
-        self.recipe = tf.Recipe(**{k: params[k] for k in recipe_keys}, owner=name)
+        if not isinstance(params["allow_slow_cpu"], bool):
+            raise ConfigError(f"{name}: allow_slow_cpu={params['allow_slow_cpu']!r} must be true or false")
+        self.recipe = tf.Recipe(**{k: params[k] for k in _RECIPE_KEYS}, owner=name)
         super().__init__(**{**params, "h_res": h, "d_res": list(d), "channels": list(c), "hidden": list(hid)})
         self.batch_materials = batch_materials
+        self.allow_slow_cpu = params["allow_slow_cpu"]
         self.tensors: dict[str, torch.Tensor] | None = None
         self.fit_info: dict[str, Any] = {}
 
     # -- fitting -----------------------------------------------------------------
     @property
     def fit_batch_size(self) -> int:
-        return self.batch_materials
+        if self.device.type == "cpu":
+            return self.batch_materials
+        return max(self.batch_materials, min(GPU_BATCH_MATERIALS, GPU_PAIRS_PER_STEP // self.recipe.batch_size))
+
+    def _move(self, device: torch.device) -> None:
+        if self.tensors is not None:  # an unfitted model holds nothing (and initialises no device)
+            self.tensors = {k: v.to(device) for k, v in self.tensors.items()}
+
+    def cpu_seconds(self) -> float:
+        """The estimated time of one material's fit on a CPU (a lower bound, see CPU_TRAIN_FLOP_RATE)."""
+        return tf.training_flops(self.recipe, self.shape) / CPU_TRAIN_FLOP_RATE
+
+    def _refuse_slow_cpu_fit(self) -> None:
+        """A ConfigError, before anything is computed, for a recipe that would take hours on
+        the CPU (unless `allow_slow_cpu`)."""
+        if self.device.type != "cpu" or self.allow_slow_cpu:
+            return
+        seconds = self.cpu_seconds()
+        if seconds <= CPU_LIMIT_S:
+            return
+        r = self.recipe
+        if r.iterations is not None:
+            steps, knobs = f"iterations={r.iterations:,} steps", "iterations, batch_size"
+        else:
+            steps = f"epochs={r.epochs} × {r.steps_per_epoch():,} steps (n_samples={r.n_samples:,})"
+            knobs = "epochs, n_samples, batch_size"
+        raise ConfigError(
+            f"{self.plugin_name}: this recipe would fit on the CPU for about {_duration(seconds)} per material "
+            f"({steps} of batch_size={r.batch_size:,} pairs × ~{3 * self.shape.flops():,} training FLOPs per pair "
+            f"≈ {tf.training_flops(r, self.shape):.2g} FLOPs at an assumed {CPU_TRAIN_FLOP_RATE:.0e} FLOP/s; a CPU "
+            f"fit may take at most {_duration(CPU_LIMIT_S)}). Run it on a GPU (device=cuda), shorten it ({knobs}), "
+            "or set allow_slow_cpu=true to fit on the CPU anyway")
 
     def fit(self, target: Material, *, seed: int = 0) -> "Tripleplane":
         fitted = self.fit_many([target], seed=seed)[0]
@@ -91,14 +152,19 @@ class Tripleplane(Representation):
         return self
 
     def fit_many(self, targets: Sequence[Material], *, seed: int = 0, progress: bool | str = False) -> list["Tripleplane"]:
+        """One fitted model per target, trained together in batches on `self.device` (the
+        models live there)."""
+        self._refuse_slow_cpu_fit()
         targets = list(targets)
         models: list[Tripleplane] = []
-        for start in range(0, len(targets), self.batch_materials):
-            group = targets[start:start + self.batch_materials]
+        per_batch = self.fit_batch_size
+        for start in range(0, len(targets), per_batch):
+            group = targets[start:start + per_batch]
             outcomes = tf.fit_batched([t.table for t in group], [material_seed(seed, t.name) for t in group],
-                                      self.shape, self.recipe, sample_seed=seed, progress=progress)
+                                      self.shape, self.recipe, sample_seed=seed, progress=progress,
+                                      device=self.device)
             for target, outcome in zip(group, outcomes):
-                model = type(self)(**self.params)
+                model = self._unfitted()
                 model.tensors = outcome.tensors
                 model.fit_info = {FIT_LOSS_KEY: outcome.loss, "fitted_to": target.name,
                                   "training_curve": outcome.curve}
@@ -109,7 +175,7 @@ class Tripleplane(Representation):
     def _eval(self, wi, wo):
         if self.tensors is None:
             raise RuntimeError(f"{self.plugin_name}: evaluate after fit() or load")
-        r_h, r_d, phi = tm.texture_coords(wi, wo)
+        r_h, r_d, phi = tm.texture_coords(wi, wo)  # in wi's dtype, as the CPU figures always were
         dtype = wi.dtype
         stacked = {k: (v.to(dtype)[None, None] if k.startswith("b") else v.to(dtype)[None])
                    for k, v in self.tensors.items()}
@@ -117,12 +183,13 @@ class Tripleplane(Representation):
         return tm.to_value(g)
 
     def drjit_kernel(self):
-        """The model in drjit operations (brdfbench.render), for this exact class only."""
+        """The model in drjit operations (brdfbench.render), for this exact class only; it
+        reads the weights on the host wherever the model lives (Mitsuba's CPU variants)."""
         if type(self) not in (Tripleplane, TriplaneGated) or self.tensors is None:
             return None
         from .drjit_kernels import TripleplaneKernel
 
-        return TripleplaneKernel(self.shape, self.tensors)
+        return TripleplaneKernel(self.shape, {k: v.detach().cpu() for k, v in self.tensors.items()})
 
     # -- persistence and cost -----------------------------------------------------------
     def state_dict(self):
@@ -151,6 +218,15 @@ class Tripleplane(Representation):
     @property
     def flops_per_eval(self) -> int:
         return self.shape.flops()
+
+
+def _duration(seconds: float) -> str:
+    """"40 s", "12 min", "1.9 h"."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.2g} h" if seconds < 36_000 else f"{math.floor(seconds / 3600):,} h"
 
 
 def _checked(tensors, shape: tm.Shape, name: str) -> dict[str, torch.Tensor]:
@@ -202,11 +278,17 @@ class TriplaneGated(Tripleplane):
                  n_samples: int = tf.Recipe.n_samples, lr: float = tf.Recipe.lr,
                  texture_lr: float = tf.Recipe.texture_lr, loss: str = tf.Recipe.loss, beta1: float = tf.Recipe.beta1,
                  ema: float | None = tf.Recipe.ema, precondition: float = tf.Recipe.precondition,
-                 init_scale: float = tf.Recipe.init_scale, batch_materials: int = 16):
+                 init_scale: float = tf.Recipe.init_scale, batch_materials: int = 16,
+                 iterations: int | None = tf.Recipe.iterations, resample: bool = tf.Recipe.resample,
+                 sampling: str = tf.Recipe.sampling, schedule: str = tf.Recipe.schedule,
+                 lr_decay: float = tf.Recipe.lr_decay, lr_decay_every: int = tf.Recipe.lr_decay_every,
+                 allow_slow_cpu: bool = False):
         (lat,) = _ints(self.plugin_name, "latent", latent, 1, 1)
         (k,) = _ints(self.plugin_name, "warps", warps, 1, 1)
         self._configure(dict(h_res=h_res, d_res=d_res, channels=channels, hidden=hidden, epochs=epochs,
                              batch_size=batch_size, n_samples=n_samples, lr=lr, texture_lr=texture_lr, loss=loss,
                              beta1=beta1, ema=ema, precondition=precondition, init_scale=init_scale,
-                             batch_materials=batch_materials), latent=lat, warps=k)
+                             batch_materials=batch_materials, iterations=iterations, resample=resample,
+                             sampling=sampling, schedule=schedule, lr_decay=lr_decay, lr_decay_every=lr_decay_every,
+                             allow_slow_cpu=allow_slow_cpu), latent=lat, warps=k)
         self.params = {**self.params, "latent": lat, "warps": k}

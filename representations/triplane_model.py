@@ -105,7 +105,7 @@ def _select(grid: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     """grid (M, N, C) at index (B,) or (M, B) → (M, B, C). index_select on the flattened
     grid: its gradient accumulates in a fixed order, so fits are deterministic on threads."""
     m, n, c = grid.shape
-    index = index.expand(m, -1) + (torch.arange(m) * n)[:, None]
+    index = index.expand(m, -1) + (torch.arange(m, device=index.device) * n)[:, None]
     return grid.reshape(m * n, c).index_select(0, index.reshape(-1)).reshape(m, -1, c)
 
 

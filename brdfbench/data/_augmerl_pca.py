@@ -19,6 +19,11 @@ observation is a rearrangement of the base's 3n mapped channel vectors x_{m,c}, 
 
 All functions take plain tensors of any width P, so tests can check them against an
 explicit-basis PCA on a small P.
+
+Devices: the two products over all P cells, `base_gram` (3n × 3n × P, fp64) and
+`reconstruct` (3 × 3n × P per mix), run where they are told or where their inputs are
+(`base_gram(centred, device)` moves one block of cells at a time); the rest is small or
+selects values (medians) and runs on the CPU.
 """
 
 from __future__ import annotations
@@ -103,13 +108,16 @@ def centre_(channels: torch.Tensor, mean: torch.Tensor) -> torch.Tensor:
     return channels
 
 
-def base_gram(centred: torch.Tensor) -> torch.Tensor:
-    """(3n, 3n) fp64 Gram matrix of the centred base channel vectors, a block of cells at a time."""
-    g = torch.zeros(centred.shape[0], centred.shape[0], dtype=torch.float64)
+def base_gram(centred: torch.Tensor, device: torch.device | str | None = None) -> torch.Tensor:
+    """(3n, 3n) fp64 Gram matrix of the centred base channel vectors, a block of cells at a
+    time, accumulated on `device` (default: centred's; each block moves there as it is
+    used); returned on the CPU."""
+    device = centred.device if device is None else torch.device(device)
+    g = torch.zeros(centred.shape[0], centred.shape[0], dtype=torch.float64, device=device)
     for start in range(0, centred.shape[1], CHUNK):
-        block = centred[:, start : start + CHUNK].double()
+        block = centred[:, start : start + CHUNK].to(device).double()
         g += block @ block.T
-    return g
+    return g.cpu()
 
 
 def permuted_gram(g: torch.Tensor) -> torch.Tensor:
@@ -180,9 +188,10 @@ def reconstruct(beta: torch.Tensor, centred: torch.Tensor, mean: torch.Tensor) -
 
     Y stays fp32 (an fp64 copy would be 2.6 GB at n = 100, and a 3-row product is bound by
     reading Y): each block of ROW_BLOCK base vectors is summed in fp32, the blocks in fp64,
-    so rounding grows with the block, not with 3n."""
+    so rounding grows with the block, not with 3n. Computed where `centred` lives (with
+    `mean` there too); the result lives there."""
     out = mean.double().expand(3, -1).clone()
-    b = beta.float()
+    b = beta.float().to(centred.device)
     for start in range(0, centred.shape[0], ROW_BLOCK):
         rows = slice(start, start + ROW_BLOCK)
         out += (b[:, rows] @ centred[rows]).double()

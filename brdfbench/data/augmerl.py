@@ -27,6 +27,17 @@ eigenvectors) is computed on the first mix loaded, kept under
 `cache_root(cache_dir)/augmerl/<key>/pca.safetensors` (key: the base's content and k) and
 read once per process; mix tables are rebuilt from it on each load. `cache_dir` is also
 handed to the base when it takes one and `base_params` does not set it.
+
+`device` (run control, never in the fingerprint: the pipeline hands the job's `device` to
+it) is where the two large products run: the base Gram matrix of the PCA build and each
+mix's reconstruction (the base channel vectors are then held there, 4 B × 3n × P). On
+the CPU (the default) nothing changes. A GPU's products differ from the CPU's in the last
+bits, so a state built with a GPU is cached under its own key (the identity records
+"device": "cuda") and never stands in for the CPU's, nor the CPU's for it: a CPU job and
+a GPU job each see one consistent set of mixes; the two sets agree within float rounding
+(tests/gpu/test_generators_gpu.py measures it) and share the fingerprint, as a
+representation fitted on either device shares its configuration, each row recording the
+device it was computed on.
 """
 
 from __future__ import annotations
@@ -259,8 +270,9 @@ def check_memory(n: int) -> None:
         )
 
 
-def build_state(base: Dataset, k: int) -> PcaState:
-    """The PCA state of the base's 6n permutations, reading one base table at a time."""
+def build_state(base: Dataset, k: int, device: torch.device = torch.device("cpu")) -> PcaState:
+    """The PCA state (on the CPU) of the base's 6n permutations, reading one base table at a
+    time; the Gram matrix is accumulated on `device`."""
     cells, w = logrel.domain()
     n, p = len(base), cells.numel()
     values = torch.empty(3 * n, p, dtype=torch.float32)
@@ -276,7 +288,7 @@ def build_state(base: Dataset, k: int) -> PcaState:
     channels = kpca.map_channels_(values, valid, reference, w)
     mean = kpca.pooled_mean(channels)
     kpca.centre_(channels, mean)
-    comp = kpca.components(kpca.permuted_gram(kpca.base_gram(channels)), k)
+    comp = kpca.components(kpca.permuted_gram(kpca.base_gram(channels, device)), k)
     return PcaState(reference, mean, channels, valid, comp)
 
 
@@ -352,13 +364,18 @@ _STATES_LOCK = threading.Lock()
 class AugmerlLoader:
     """The dataset's loader: builds a permuted or mixed material by name; holds the recipes."""
 
-    def __init__(self, base_name: str, base: Dataset, recipes: dict[str, Permuted | Mix], k: int, cache_dir):
+    def __init__(self, base_name: str, base: Dataset, recipes: dict[str, Permuted | Mix], k: int, cache_dir,
+                 device: torch.device = torch.device("cpu")):
         self.base_name, self.base, self.recipes, self.k = base_name, base, recipes, k
+        self.device = device
         self.identity = {"version": VERSION, "base": _base_identity(base_name, base), "k": k}
+        if device.type != "cpu":  # a GPU's PCA is not the CPU's bit for bit: its own cache entry
+            self.identity["device"] = device.type
         self.pca_key = _digest(self.identity)
         self.pca_path = cache_root(cache_dir) / "augmerl" / self.pca_key / "pca.safetensors"
         self._last: tuple[str, MerlTable] | None = None  # the six permutations of a base come in a row
         self._lock = threading.Lock()
+        self._placed: tuple[PcaState, torch.Tensor, torch.Tensor] | None = None  # (state, channels, mean) on device
 
     def __call__(self, name: str) -> Material:
         recipe = self.recipes[name]
@@ -389,17 +406,27 @@ class AugmerlLoader:
                 if state is None:
                     check_memory(len(self.base))
                     note(f"augmerl: building the PCA of {6 * len(self.base)} permuted materials of {self.base_name!r}")
-                    state = build_state(self.base, self.k)
+                    state = build_state(self.base, self.k, self.device)
                     write_state(self.pca_path, state, self.identity)
                 note(f"augmerl: PCA with {describe_k(state.comp)}")
                 _STATES[self.pca_key] = state
             return state
 
+    def _operands(self, state: PcaState) -> tuple[torch.Tensor, torch.Tensor]:
+        """The state's channel vectors and mean where the reconstruction runs (moved once)."""
+        if self.device.type == "cpu":
+            return state.channels, state.mean
+        with self._lock:
+            if self._placed is None or self._placed[0] is not state:
+                self._placed = None  # free the previous state's copy first
+                self._placed = (state, state.channels.to(self.device), state.mean.to(self.device))
+            return self._placed[1], self._placed[2]
+
     def mix_mapped(self, mix: Mix) -> torch.Tensor:
-        """(3, P) fp64 mapped channels of a mix (its PCA reconstruction)."""
+        """(3, P) fp64 mapped channels of a mix (its PCA reconstruction), on the CPU."""
         state = self.state()
         beta = kpca.channel_weights(kpca.mix_weights(state.comp, mix.a.index, mix.b.index, mix.t))
-        return kpca.reconstruct(beta, state.channels, state.mean)
+        return kpca.reconstruct(beta, *self._operands(state)).cpu()
 
     def mix_table(self, mix: Mix) -> MerlTable:
         state = self.state()
@@ -418,9 +445,13 @@ class AugmerlLoader:
 
 def augmerl_dataset(base: str = "synthetic", base_params: Mapping[str, Any] | None = None, size: int = DEFAULT_SIZE,
                     test_fraction: float = 0.1, seed: int = 0, k: int = DEFAULT_K,
-                    cache_dir: str | os.PathLike | None = None) -> Dataset:
+                    cache_dir: str | os.PathLike | None = None, device: str = "cpu") -> Dataset:
     """AugMERL over `base` (see the module docstring): `size` materials in total, a seeded
-    `test_fraction` held out. Cheap to build: tables (and the PCA) are made on first load."""
+    `test_fraction` held out. Cheap to build: tables (and the PCA) are made on first load.
+    `device`: where the PCA's products run (run control; see the module docstring)."""
+    from ..device import resolve
+
+    placed = resolve(device, f"{_KEY}.device")
     check_scalars(size, test_fraction, seed, k)
     size, seed, k, test_fraction = int(size), int(seed), int(k), float(test_fraction)
     base_ds = load_base(base, base_params, cache_dir)
@@ -432,7 +463,7 @@ def augmerl_dataset(base: str = "synthetic", base_params: Mapping[str, Any] | No
     from ..generator_protocol import seeded_split
 
     train, test = seeded_split(names, test_fraction, seed)
-    loader = AugmerlLoader(base, base_ds, recipes, k, cache_dir)
+    loader = AugmerlLoader(base, base_ds, recipes, k, cache_dir, placed)
     fingerprint = "augmerl-" + VERSION + ":" + _digest(
         [VERSION, _base_identity(base, base_ds), size, test_fraction, seed, k])
     categories = {r.name: MIXTURE if isinstance(r, Mix) else base_ds.category(r.base) for r in recipes.values()}

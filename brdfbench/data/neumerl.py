@@ -17,6 +17,16 @@ fitting recipe and the anchor. Each material is `<name>.npy` (the 675-vector lay
 sha256, the anchor's sha256 and the fit loss; both are written atomically as each batch
 finishes, so an interrupted fit resumes where it stopped. A file that is unreadable, not
 the recorded content, or fitted from another anchor is refitted with a warning.
+
+Device: `device` (run control, like AugMERL's: never in the fingerprint; the pipeline hands
+the job's `device` to it) is where the fits run, through the `nbrdf` fitter's device path
+(`nbrdf_fit.fit_batched(device=…)`), `GPU_BATCH_MATERIALS` materials per batch on a GPU.
+A GPU fit is not bitwise the CPU's, so the vectors a GPU fits are cached apart: the cache
+key and every record name the device type (the CPU's key is unchanged), the anchor is
+fitted on the same device as the rest, and a set never mixes CPU and GPU fits. Both sets
+share the dataset fingerprint, as representation fits on either device share their
+configuration: the two agree within the fitter's GPU tolerance (fit losses within a few
+per cent, tests/gpu), and each result row records the device it was computed on.
 """
 
 from __future__ import annotations
@@ -103,19 +113,26 @@ def file_stem(name: str) -> str:
 class NeumerlWeights:
     """`weights(names)` of a NeuMERL dataset: cached vectors, fitting the missing ones."""
 
-    def __init__(self, tables: Dataset, params: dict[str, Any], batch_materials: int, fit_seed: int, cache_dir):
+    def __init__(self, tables: Dataset, params: dict[str, Any], batch_materials: int, fit_seed: int, cache_dir,
+                 device: torch.device = torch.device("cpu")):
         self.tables = tables
         self.params = params
         self.batch_materials = batch_materials
         self.fit_seed = fit_seed
+        self.device = device
         self.anchor = tables.splits["train"][0]
         spec = registry.get("representations", FITTER)
         probe = spec.create(**params, **FIXED)  # a bad value fails now, naming it; its params fill in the defaults
+        if device.type != "cpu":  # the fitter batches more materials at once on a GPU
+            self.batch_materials = max(batch_materials, probe.to(device).fit_batch_size)
         #: What a fitted vector depends on: the fitter, its full recipe and the sample seed (not
         #: `batch_materials`: results do not depend on batch-mates).
         self.recipe = {"fitter": FITTER, "version": registry.version("representations", FITTER), "fit_seed": fit_seed,
                        **{k: v for k, v in probe.params.items() if k not in ("init", "batch_materials")}}
-        self.key = _digest([VERSION, tables.fingerprint, self.recipe, self.anchor])
+        keyed = [VERSION, tables.fingerprint, self.recipe, self.anchor]
+        if device.type != "cpu":  # a GPU's fits are cached apart from the CPU's (see the module docstring)
+            keyed.append(device.type)
+        self.key = _digest(keyed)
         self.folder = cache_root(cache_dir) / "neumerl" / self.key
         self._lock = threading.Lock()
 
@@ -155,6 +172,10 @@ class NeumerlWeights:
             digest = sha256_file(npy)
             doc = {"format": _RECORD_FORMAT, "name": name, "key": self.key, "sha256": digest,
                    "anchor": self.anchor, "anchor_sha256": anchor_sha, **info}
+            if self.device.type != "cpu":
+                from ..device import describe
+
+                doc["fitted_on"] = describe(self.device)
             with replacing(record) as tmp:
                 tmp.write_text(json.dumps(doc, sort_keys=True) + "\n", encoding="utf-8")
         except OSError as exc:
@@ -163,8 +184,9 @@ class NeumerlWeights:
 
     # -- fitting -------------------------------------------------------------------------
     def _fitter(self, init: str):
-        return registry.get("representations", FITTER).create(**self.params, **FIXED, init=init,
-                                                               batch_materials=max(2, self.batch_materials))
+        fitter = registry.get("representations", FITTER).create(**self.params, **FIXED, init=init,
+                                                                 batch_materials=max(2, self.batch_materials))
+        return fitter if self.device.type == "cpu" else fitter.to(self.device)
 
     def _fit(self, names: Sequence[str], init: str) -> list[tuple[dict[str, torch.Tensor], dict[str, Any]]]:
         """Fit `names` as one batch. A lone material is fitted beside a copy of itself: the
@@ -172,7 +194,8 @@ class NeumerlWeights:
         bits, and a resumed set must equal a one-shot one exactly."""
         targets = [self.tables.load(n) for n in names]
         models = self._fitter(init).fit_many(targets * 2 if len(targets) == 1 else targets, seed=self.fit_seed)
-        return [(m.weights, {"fit_loss": m.fit_info.get("fit_loss"), "epochs": m.fit_info.get("epochs")})
+        return [({k: v.cpu() for k, v in m.weights.items()},
+                 {"fit_loss": m.fit_info.get("fit_loss"), "epochs": m.fit_info.get("epochs")})
                 for m in models[: len(names)]]
 
     def anchor_vector(self) -> tuple[np.ndarray, str]:
@@ -246,15 +269,19 @@ def neumerl_dataset(base: str = "synthetic", base_params: Mapping[str, Any] | No
                     cache_dir: str | os.PathLike | None = None, hidden: Sequence[int] = (21, 21),
                     epochs: int = DEFAULT_EPOCHS, n_samples: int = DEFAULT_N_SAMPLES,
                     batch_size: int = DEFAULT_BATCH_SIZE, lr: float = DEFAULT_LR,
-                    batch_materials: int = DEFAULT_BATCH_MATERIALS, fit_seed: int = 0) -> Dataset:
+                    batch_materials: int = DEFAULT_BATCH_MATERIALS, fit_seed: int = 0, device: str = "cpu") -> Dataset:
     """AugMERL's tables and splits (same parameters) plus aligned NBRDF weight vectors,
-    fitted on first use and cached (see the module docstring)."""
+    fitted on first use and cached (see the module docstring). `device`: where the fits
+    (and AugMERL's PCA products) run; run control, not part of the fingerprint."""
+    from ..device import resolve
+
+    placed = resolve(device, f"{_KEY}.device")
     params = fit_params(hidden, epochs, n_samples, batch_size, lr)
     batch_materials = _positive_int("batch_materials", batch_materials)
     if isinstance(fit_seed, bool) or not isinstance(fit_seed, (int, np.integer)) or fit_seed < 0:
         raise ConfigError(f"{_KEY}.fit_seed={fit_seed!r}: must be a non-negative integer")
-    tables = augmerl_dataset(base, base_params, size, test_fraction, seed, k, cache_dir)
-    weights = NeumerlWeights(tables, params, batch_materials, int(fit_seed), cache_dir)
+    tables = augmerl_dataset(base, base_params, size, test_fraction, seed, k, cache_dir, device=str(placed))
+    weights = NeumerlWeights(tables, params, batch_materials, int(fit_seed), cache_dir, placed)
     fingerprint = f"neumerl-{VERSION}:{_digest([VERSION, tables.fingerprint, weights.recipe])}"
     return Dataset("neumerl", tables.materials, tables.loader, fingerprint, tables.categories, tables.splits, weights)
 

@@ -75,6 +75,13 @@ class _Pairs:
     def cos(self) -> torch.Tensor:
         return self.wi[:, 2].contiguous()
 
+    def typed_on(self, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+        """The pairs in the evaluation dtype on `device`, moved there once and kept."""
+        key = ("typed", str(device))
+        if key not in self._data:
+            self._data[key] = tuple(t.to(device) for t in self.typed)
+        return self._data[key]
+
     def data(self, fn: Callable[..., Any], args: tuple = ()) -> Any:
         """fn(wi, wo, *args) of all pairs in the evaluation dtype, computed chunk by chunk."""
         key = (fn, args)
@@ -155,12 +162,27 @@ def _score(model: Representation, pairs: _Pairs, mask: torch.Tensor, ref: torch.
     holds; `ref` is channel-major (3, N)."""
     index = mask.nonzero().squeeze(1)
     ref = _rows(ref, index)
-    cos, batches = pairs.select(index)
     device = model.device
+    if device.type != "cpu":  # a model on a GPU evaluates there, at pairs moved once per job
+        _score_on(device, model, pairs, index, ref, metrics)
+        return
+    cos, batches = pairs.select(index)
     for s, a, b in batches:
-        # a model on a GPU evaluates there (its derived data made there too); scores are
-        # accumulated on the host, in the same order either way
-        pred = model.eval(a, b) if device.type == "cpu" else model.eval(a.to(device), b.to(device)).cpu()
+        pred = model.eval(a, b)
+        for m in metrics:
+            m.update(pred, ref[s], cos[s])
+
+
+def _score_on(device: torch.device, model: Representation, pairs: _Pairs, index: torch.Tensor, ref: torch.Tensor,
+              metrics: list) -> None:
+    """`_score` for a model on `device`: the same chunks evaluated there (what models derive
+    from the pairs is made there too), the scores accumulated on the host in the same order."""
+    wi, wo = pairs.typed_on(device)
+    cos = pairs.cos.index_select(0, index)
+    on_device = index.to(device)
+    for s in _chunks(index.shape[0], pairs.chunk):
+        rows = on_device[s]
+        pred = model.eval(wi.index_select(0, rows), wo.index_select(0, rows)).cpu()
         for m in metrics:
             m.update(pred, ref[s], cos[s])
 

@@ -81,7 +81,8 @@ def check_params(cls, params: dict[str, Any], where: str, internal: tuple[str, .
         raise ConfigError(f"{where}={params!r} must be a mapping of parameters")
     for key in params:
         if key in internal:
-            raise ConfigError(f"{where}.{key} is set by brdfbench, not by a config")
+            hint = " (the top-level key device=... sets it for the whole job)" if key == "device" else ""
+            raise ConfigError(f"{where}.{key} is set by brdfbench, not by a config{hint}")
     sig = inspect.signature(cls)
     if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
         return
@@ -97,7 +98,7 @@ _PRECHECKED: dict[str, Checked] = {}
 
 def _key(job: RunConfig) -> str:
     return repr((job.plugin_group, job.plugin, job.plugin_params, job.dataset, job.dataset_params, job.harness,
-                 job.scene, job.scene_params, job.materials, job.limit))
+                 job.scene, job.scene_params, job.materials, job.limit, job.device))
 
 
 def precheck(job: RunConfig) -> Checked:
@@ -127,8 +128,11 @@ def check(job: RunConfig) -> Checked:
     metric_specs = [registry.get("metrics", m) for m in job.harness.metrics]
     harness_cls.validate(job.harness, scene, metric_specs)
     ds_factory = registry.get("datasets", job.dataset).load()
-    check_params(ds_factory, job.dataset_params, "dataset.params")
-    dataset = ds_factory(**job.dataset_params).subset(list(job.materials) if job.materials else None, job.limit)
+    check_params(ds_factory, job.dataset_params, "dataset.params", internal=("device",))
+    # a dataset that computes (NeuMERL's fits, AugMERL's PCA) takes the job's device: run
+    # control, never part of its fingerprint
+    placed = {"device": job.device} if "device" in inspect.signature(ds_factory).parameters else {}
+    dataset = ds_factory(**job.dataset_params, **placed).subset(list(job.materials) if job.materials else None, job.limit)
     harness_cls.check_plugin(job.harness, spec, dataset)
     return Checked(spec, cls, probe, harness_cls, scene, metric_specs, dataset)
 

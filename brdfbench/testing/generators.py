@@ -12,6 +12,16 @@ direction pairs, a save/load round trip without pickle, clear errors for n ≤ 0
 sample set larger than memory (refused before allocating), a fit that depends on its seed
 alone, and declared costs. A spec's `check_params` make the quick run; `full=True` uses
 the generator's defaults.
+
+Devices (`brdfbench.device.Placed`), for a generator that takes part in them (declares
+`devices` other than the CPU alone, or overrides `to` / `_move`): `devices_declared` runs
+anywhere (known device types, the CPU among them, a new generator on the CPU, `to` of an
+undeclared type refused, `to("cpu")` of a fitted CPU generator a no-op); for one that
+declares "cuda", `device_agreement` runs where a GPU is (skipped elsewhere, as
+`kit.NoDevice`): the CPU-fitted generator moved there samples the CPU's array within
+DEVICE_SAMPLE_RTOL for the same seed (every draw comes from the seed's CPU generator, so
+only float rounding differs), and one trained there keeps its state there and samples
+finite values that evaluate finite and non-negative.
 """
 
 from __future__ import annotations
@@ -31,7 +41,7 @@ from ..protocol import Material, Representation
 from ..specs import GeneratorSpec
 from .adversarial import adversarial_pairs
 from .checks import CheckSet
-from .kit import Check, ConformanceReport
+from .kit import KNOWN_DEVICES, Check, ConformanceReport, NoDevice, _gpu
 
 #: Seed of the kit's shared fit, so it is one side of the fit-determinism check.
 FIT_SEED = 5
@@ -40,6 +50,10 @@ TRAINING_INDICES = tuple(range(8))
 N_SAMPLES = 4
 #: A recipe that fits the kit's NBRDF training vectors in seconds (aligned: init=shared).
 QUICK_NBRDF = {"epochs": 3, "n_samples": 60_000, "batch_size": 2048, "init": "shared", "patience": None}
+#: The CPU-fitted generator moved to a GPU samples the CPU's array within this share of the
+#: array's largest magnitude (the same draws; the products round differently, and a
+#: diffusion sampler carries that through its steps).
+DEVICE_SAMPLE_RTOL = 1e-3
 
 
 @lru_cache(maxsize=1)
@@ -213,6 +227,92 @@ def check_cost_declared(ctx: Context) -> None:
     assert sizes == sorted(sizes), f"sample_nbytes must not shrink as n grows: {sizes} for n = 1, 10, 1000"
 
 
+def _places(cls: type) -> bool:
+    """Whether a generator class takes part in the device protocol: declares devices beyond
+    the CPU, or overrides `to` or `_move` (one that does none of these runs on the CPU and
+    inherits a `to` that refuses any other device: nothing to check)."""
+    from ..device import Placed
+
+    return (getattr(cls, "devices", frozenset({"cpu"})) != frozenset({"cpu"})
+            or getattr(cls, "to", None) is not Placed.to or getattr(cls, "_move", None) is not Placed._move)
+
+
+@check()
+def check_devices_declared(ctx: Context) -> None:
+    """`devices` names known device types, the CPU among them; a new generator is on the CPU;
+    `to` refuses an undeclared type before any work; `to("cpu")` of a fitted CPU generator
+    returns it and changes none of its samples."""
+    cls = ctx.spec.load()
+    declared = cls.devices
+    assert isinstance(declared, (frozenset, set)) and "cpu" in declared, (
+        f"{cls.__name__}.devices must be a set of device types including 'cpu', got {declared!r}")
+    unknown = set(declared) - KNOWN_DEVICES
+    assert not unknown, (f"{cls.__name__}.devices names unknown device type(s) {sorted(unknown)}; "
+                         f"known: {sorted(KNOWN_DEVICES)}")
+    model = ctx.fresh()
+    assert model.device == torch.device("cpu"), f"a new generator must start on the CPU, got {model.device}"
+    if "cuda" not in declared:
+        try:
+            model.to("cuda:0")
+        except ConfigError:
+            pass
+        else:
+            raise AssertionError(f"{cls.__name__}.to('cuda:0') was accepted but 'cuda' is not in its devices")
+    fitted = ctx.model
+    before = fitted.sample(N_SAMPLES, seed=21)
+    assert fitted.to("cpu") is fitted, "to() must return the generator itself"
+    assert fitted.device == torch.device("cpu"), f"to('cpu') left the generator on {fitted.device}"
+    after = fitted.sample(N_SAMPLES, seed=21)
+    assert after.array.device.type == "cpu", f"a CPU generator sampled an array on {after.array.device}"
+    assert _arrays_equal(before, after), "to('cpu') changed a CPU generator's samples"
+
+
+def _evaluates_finite_nonnegative(samples: SampleSet, where: str) -> None:
+    from ..device import on_host
+
+    bad = (~samples.finite).nonzero().flatten().tolist()
+    assert not bad, f"{where}: samples {bad} have non-finite parameters"
+    items = [samples[i] for i in range(len(samples))]  # built once (a table sample is a full table)
+    for dtype in (torch.float32, torch.float64):
+        for family, (wi, wo) in adversarial_pairs(2000, dtype, seed=22).items():
+            for i, item in enumerate(items):
+                out = on_host(item.eval, item.device)(wi, wo)
+                assert torch.isfinite(out).all(), f"{where}: sample {i} non-finite on {family} pairs ({dtype})"
+                assert (out >= 0).all(), f"{where}: sample {i} negative on {family} pairs ({dtype})"
+
+
+@check()
+def check_device_agreement(ctx: Context) -> None:
+    """Where a generator declares "cuda" and a GPU is here: the CPU-fitted generator, rebuilt
+    from its state and moved to the GPU, samples there the CPU's array within
+    DEVICE_SAMPLE_RTOL (same seed); a generator trained on the GPU keeps its state there,
+    samples there, and its samples are finite and evaluate finite and non-negative."""
+    cls = ctx.spec.load()
+    if "cuda" not in cls.devices:
+        raise NoDevice(f"{cls.__name__} runs on the CPU only (devices = {sorted(cls.devices)})")
+    gpu = _gpu()
+    cpu_model = ctx.model
+    state = {k: v.detach().cpu().clone() for k, v in cpu_model.state_dict().items()}
+    moved = cls.from_state(dict(cpu_model.params), state, cpu_model.metadata()).to(gpu)
+    assert moved.device.type == "cuda", f"to({gpu}) left the generator on {moved.device}"
+    a, b = cpu_model.sample(N_SAMPLES, seed=31), moved.sample(N_SAMPLES, seed=31)
+    assert b.array.device.type == "cuda", f"a generator on {gpu} sampled an array on {b.array.device}"
+    assert a.array.shape == b.array.shape, f"GPU samples have shape {tuple(b.array.shape)}, CPU {tuple(a.array.shape)}"
+    x, y = a.array.double(), b.array.cpu().double()
+    scale = float(x.abs().max()) or 1.0
+    worst = float((x - y).abs().max())
+    assert worst <= DEVICE_SAMPLE_RTOL * scale, (
+        f"the generator moved to {gpu} samples differently from the CPU one: up to {worst:.3g} apart "
+        f"(arrays up to {scale:.3g}; allowed {DEVICE_SAMPLE_RTOL:g} of that)")
+    trained = ctx.fresh().to(gpu).fit(training_data(), seed=FIT_SEED)
+    assert trained.device.type == "cuda", f"a generator trained on {gpu} reports device {trained.device}"
+    off = sorted(k for k, v in trained.state_dict().items() if v.device.type != "cuda")
+    assert not off, f"a generator trained on {gpu} holds {off[:5]} on the CPU"
+    samples = trained.sample(N_SAMPLES, seed=32)
+    assert samples.array.device.type == "cuda", f"a generator trained on {gpu} sampled an array on {samples.array.device}"
+    _evaluates_finite_nonnegative(samples, f"trained on {gpu}")
+
+
 def _resolve(spec_or_name) -> GeneratorSpec:
     if isinstance(spec_or_name, GeneratorSpec):
         return spec_or_name
@@ -228,8 +328,13 @@ def generator_checks(spec_or_name, *, params: dict | None = None, full: bool = F
     """The checks that apply to a generator, sharing one fitted generator between them."""
     spec = _resolve(spec_or_name)
     ctx = Context(spec, kit_params(spec, params, full))
+    cls = spec.load()
+    places, on_gpu = _places(cls), "cuda" in getattr(cls, "devices", ())
+    skipped = {"devices_declared"} if not places else set()
+    if not on_gpu:  # a CPU-only generator: nothing to compare across devices
+        skipped.add("device_agreement")
     return [Check(spec.name, name, (lambda fn=fn: fn(ctx)), spec.xfail_checks.get(name))
-            for name, (requires, fn) in CHECKS.items() if requires <= spec.tags]
+            for name, (requires, fn) in CHECKS.items() if requires <= spec.tags and name not in skipped]
 
 
 def check_generator(spec_or_name, *, params: dict | None = None, full: bool = False) -> ConformanceReport:

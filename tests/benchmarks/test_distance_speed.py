@@ -7,7 +7,9 @@ the members' own memory does not count.
     BRDFBENCH_DISTANCE_N=240 python -m pytest tests/benchmarks/test_distance_speed.py --benchmark-enable
 
 `extra_info` records N, the cells compared and the peak resident memory of the process
-(ru_maxrss, so a high-water mark over the whole session).
+(ru_maxrss, so a high-water mark over the whole session). The GPU case (skipped without
+CUDA) times the same matrix computed on cuda:0 (`device=`, the torch path), the device
+synchronised before the clock is read, and records the peak device memory it allocated.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import resource
 
 import numpy as np
 import pytest
+import torch
 
 from brdfbench.data.synthetic import generate_material
 from brdfbench_metrics import brdf_distances
@@ -56,3 +59,36 @@ def test_distance_matrix(benchmark, members, cells, kind):
     assert d.shape == (N, N) and np.isfinite(d).all()
     benchmark.extra_info.update(n=N, cells=int(len(cells)),
                                 peak_rss_gib=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20, 2))
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("kind", brdf_distances.KINDS)
+def test_distance_matrix_on_gpu(benchmark, members, cells, kind):
+    if not torch.cuda.is_available():
+        pytest.skip("no CUDA device: the GPU distance matrix needs one")
+    if not benchmark.enabled:
+        pytest.skip("times a full-grid distance matrix on the GPU: run with --benchmark-enable")
+    device = torch.device("cuda", 0)
+    brdf_distances.distance_matrix(members[:2], kind=kind, cells=cells[:1000], device=device)  # CUDA's start-up
+    torch.cuda.synchronize(device)
+    torch.cuda.reset_peak_memory_stats(device)
+
+    def on_gpu():
+        d = brdf_distances.distance_matrix(members, kind=kind, cells=cells, device=device)
+        torch.cuda.synchronize(device)  # every queued kernel inside the timing
+        return d
+
+    d = benchmark.pedantic(on_gpu, rounds=1, iterations=1)
+    assert d.shape == (N, N) and np.isfinite(d).all()
+    from brdfbench.device import describe
+
+    # the limit: each member's values cross to the device once (N × 3 × cells fp64 reads are
+    # memory, not arithmetic), and the N² / 2 pairs' sums over 3 × cells values are at least
+    # one read of each operand from the card's fastest memory; the copy leg is the bound here
+    bytes_in = N * 3 * len(cells) * 8
+    benchmark.extra_info.update(n=N, cells=int(len(cells)), device=describe(device),
+                                peak_gpu_gib=round(torch.cuda.max_memory_allocated(device) / 2**30, 2),
+                                peak_rss_gib=round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20, 2),
+                                value=benchmark.stats.stats.mean, unit="s", higher_is_better=False,
+                                target="<= 5 (N = 240)", limit=bytes_in / 25e9,
+                                limit_what="the members' fp64 values over an assumed 25 GB/s host-to-device link")

@@ -197,3 +197,19 @@ def test_the_memo_is_bounded():
     for wi, wo in kept:
         reused.register(wi, wo, lambda fn, args: None)
     assert len(reused._ENTRIES) <= reused.MAX_ENTRIES
+
+
+@pytest.mark.parametrize("name", ["nbrdf", "ggx", "lambert"])
+def test_the_device_scoring_path_gives_the_host_path_scores(name, specs, materials, monkeypatch):
+    """A model on a GPU is scored at pairs kept on the device and gathered there by index
+    (`_score_on`); run on the CPU, that path must give the host path's scores exactly."""
+    from brdfbench.harness import accuracy
+
+    target = materials[1]
+    model = _fit(name, target, **({"epochs": 1, "n_samples": 20_000} if name == "nbrdf" else {}))
+    host = _cached(model, target, specs, n_random=50_000)
+    monkeypatch.setattr(accuracy, "_score", lambda model, pairs, mask, ref, metrics: accuracy._score_on(
+        torch.device("cpu"), model, pairs, mask.nonzero().squeeze(1), accuracy._rows(ref, mask.nonzero().squeeze(1)),
+        metrics))
+    device_path = _cached(model, target, specs, n_random=50_000)
+    assert device_path == host

@@ -76,6 +76,30 @@ class LeaksBelowHorizon(Lambert):
         return self._eval(wi, wo)
 
 
+class DeclaresAnUnknownDevice(Lambert):
+    tags = Lambert.tags
+    devices = frozenset({"cpu", "tpu"})
+
+
+class MovesBadly(Lambert):
+    """Its `_move` rescales what it moves: `to("cpu")` changes a CPU model's values."""
+
+    tags = Lambert.tags
+
+    def _move(self, device):
+        self.albedo = self.albedo.to(device) * 2
+
+
+class AcceptsAnyDevice(Lambert):
+    """Runs on the CPU only, but its `to` accepts a GPU it would not use."""
+
+    tags = Lambert.tags
+    devices = frozenset({"cpu"})
+
+    def to(self, device):
+        return self
+
+
 def _spec(cls, name, **kw):
     spec = RepresentationSpec(name=name, description="test plugin", target=f"{__name__}:{cls.__name__}", tags=Lambert.tags, **kw)
     registry.register("representations", spec)
@@ -88,6 +112,9 @@ def _spec(cls, name, **kw):
         (NegativeAtGrazing, "adversarial_finite_nonnegative"),
         (NotReciprocal, "reciprocity"),
         (LeaksBelowHorizon, "zero_below_horizon"),
+        (DeclaresAnUnknownDevice, "devices_declared"),
+        (MovesBadly, "devices_declared"),
+        (AcceptsAnyDevice, "devices_declared"),
     ],
 )
 def test_kit_catches_broken_plugins(cls, failing):

@@ -55,3 +55,35 @@ def test_nbrdf_release_section_says_refitting_favours_nbrdf():
     text = markdown.render(_df().assign(dataset="nbrdf_release"), "store.sqlite")
     assert "favours `nbrdf`" in text
     assert "favours" not in markdown.render(_df(), "store.sqlite")
+
+
+def _with_gpu(df):
+    """`fast` fitted and timed on a GPU, `good` on the CPU."""
+    on_gpu = df.representation == "fast"
+    return df.assign(device=on_gpu.map({True: "cuda:0", False: "cpu"}),
+                     device_detail=on_gpu.map({True: "NVIDIA H200, 139.8 GiB, CC 9.0", False: "cpu"}))
+
+
+def test_gpu_timings_are_marked_and_never_ranked_against_cpu_ones():
+    from brdfbench_leaderboard import html, view
+
+    df = _with_gpu(_df())
+    text = markdown.render(df, "store.sqlite")
+    fast = next(line for line in text.splitlines() if "`fast`" in line and line.startswith("|"))
+    good = next(line for line in text.splitlines() if "`good`" in line and line.startswith("|"))
+    assert "0.01‡" in fast and "‡" not in good
+    assert "‡ computed on a GPU (NVIDIA H200)" in text
+    section = next(s for s in view.build(df, "s").sections if s.kind == "table")
+    assert section.accelerators == ["NVIDIA H200"]
+    # the fastest fit is the GPU's, but the column's best mark goes to the best CPU figure
+    assert [r.label for r in section.timing_peers("fit_time")] == ["good"]
+    assert html._best(section, section.metrics["fit_time"]) == next(r.config_hash for r in section.rows if r.label == "good")
+    # accuracy is not a timing: every configuration ranks
+    assert [r.label for r in section.timing_peers("l1_log_cos")] == ["good", "fast"]
+    page = html.render(df, "store.sqlite")
+    assert "measured on a GPU (NVIDIA H200)" in page and "computed on a GPU (NVIDIA H200)" in page
+
+
+def test_accelerator_is_the_model_of_a_gpu_and_nothing_for_the_cpu():
+    assert tables.accelerator("cpu") == "" and tables.accelerator("") == ""
+    assert tables.accelerator("NVIDIA H200, 139.8 GiB, CC 9.0, driver 580.1") == "NVIDIA H200"
