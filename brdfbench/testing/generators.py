@@ -41,7 +41,9 @@ from ..protocol import Material, Representation
 from ..specs import GeneratorSpec
 from .adversarial import adversarial_pairs
 from .checks import CheckSet
-from .kit import KNOWN_DEVICES, Check, ConformanceReport, NoDevice, _gpu
+from .devices import NoDevice, assert_declared
+from .devices import gpu as gpu_device
+from .kit import Check, ConformanceReport
 
 #: Seed of the kit's shared fit, so it is one side of the fit-determinism check.
 FIT_SEED = 5
@@ -242,22 +244,7 @@ def check_devices_declared(ctx: Context) -> None:
     """`devices` names known device types, the CPU among them; a new generator is on the CPU;
     `to` refuses an undeclared type before any work; `to("cpu")` of a fitted CPU generator
     returns it and changes none of its samples."""
-    cls = ctx.spec.load()
-    declared = cls.devices
-    assert isinstance(declared, (frozenset, set)) and "cpu" in declared, (
-        f"{cls.__name__}.devices must be a set of device types including 'cpu', got {declared!r}")
-    unknown = set(declared) - KNOWN_DEVICES
-    assert not unknown, (f"{cls.__name__}.devices names unknown device type(s) {sorted(unknown)}; "
-                         f"known: {sorted(KNOWN_DEVICES)}")
-    model = ctx.fresh()
-    assert model.device == torch.device("cpu"), f"a new generator must start on the CPU, got {model.device}"
-    if "cuda" not in declared:
-        try:
-            model.to("cuda:0")
-        except ConfigError:
-            pass
-        else:
-            raise AssertionError(f"{cls.__name__}.to('cuda:0') was accepted but 'cuda' is not in its devices")
+    assert_declared(ctx.spec.load(), ctx.fresh())
     fitted = ctx.model
     before = fitted.sample(N_SAMPLES, seed=21)
     assert fitted.to("cpu") is fitted, "to() must return the generator itself"
@@ -290,7 +277,7 @@ def check_device_agreement(ctx: Context) -> None:
     cls = ctx.spec.load()
     if "cuda" not in cls.devices:
         raise NoDevice(f"{cls.__name__} runs on the CPU only (devices = {sorted(cls.devices)})")
-    gpu = _gpu()
+    gpu = gpu_device()
     cpu_model = ctx.model
     state = {k: v.detach().cpu().clone() for k, v in cpu_model.state_dict().items()}
     moved = cls.from_state(dict(cpu_model.params), state, cpu_model.metadata()).to(gpu)

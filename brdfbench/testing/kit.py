@@ -17,6 +17,8 @@ from ..protocol import Material, Representation
 from ..specs import RepresentationSpec
 from .adversarial import adversarial_pairs
 from .checks import CheckSet
+from .devices import DEVICE_EVAL_RTOL, DEVICE_FIT_ABS, DEVICE_FIT_REL, NoDevice, assert_declared
+from .devices import gpu as gpu_device
 
 DTYPES = (torch.float32, torch.float64)
 DEFAULT_PAIRS = 10**6
@@ -170,28 +172,6 @@ def check_save_load_roundtrip(ctx: Context) -> None:
         assert torch.equal(a, b), f"loaded model differs by up to {float((a - b).abs().max()):.3g} ({dtype})"
 
 
-#: Device types a plugin may declare (torch.device types brdfbench can resolve or may later).
-KNOWN_DEVICES = frozenset({"cpu", "cuda"})
-#: A fit on a GPU may differ from the CPU fit (other summation orders); its accuracy on the
-#: reference material must agree with the CPU fit's within this share (or DEVICE_FIT_ABS).
-DEVICE_FIT_REL, DEVICE_FIT_ABS = 0.05, 2e-3
-#: The same fitted model evaluated on a GPU and on the CPU: relative agreement.
-DEVICE_EVAL_RTOL = 1e-5
-
-
-class NoDevice(unittest.SkipTest):
-    """A device check that cannot run here (no such device, or the plugin declares none):
-    reported as skipped by the kit and by pytest."""
-
-
-def _gpu() -> torch.device:
-    from ..device import cuda_count
-
-    if not cuda_count():
-        raise NoDevice("no CUDA device here: the GPU checks run where torch sees one")
-    return torch.device("cuda", 0)
-
-
 def _log_error(model: Representation, wi: torch.Tensor, wo: torch.Tensor, ref: torch.Tensor) -> float:
     """Mean |log(1 + f cos θi) − log(1 + ref cos θi)| of a model at host pairs."""
     device = model.device
@@ -204,23 +184,7 @@ def _log_error(model: Representation, wi: torch.Tensor, wo: torch.Tensor, ref: t
 def check_devices_declared(ctx: Context) -> None:
     """`devices` names known device types, the CPU among them; `to` refuses an undeclared
     type before any work, and `to("cpu")` of a fitted CPU model changes nothing."""
-    cls = ctx.spec.load()
-    declared = cls.devices
-    assert isinstance(declared, (frozenset, set)) and "cpu" in declared, (
-        f"{cls.__name__}.devices must be a set of device types including 'cpu', got {declared!r}")
-    unknown = set(declared) - KNOWN_DEVICES
-    assert not unknown, f"{cls.__name__}.devices names unknown device type(s) {sorted(unknown)}; known: {sorted(KNOWN_DEVICES)}"
-    model = ctx.spec.create(**ctx.params)
-    assert model.device == torch.device("cpu"), f"a new model must start on the CPU, got {model.device}"
-    if "cuda" not in declared:
-        from ..errors import ConfigError
-
-        try:
-            model.to("cuda:0")
-        except ConfigError:
-            pass
-        else:
-            raise AssertionError(f"{cls.__name__}.to('cuda:0') was accepted but 'cuda' is not in its devices")
+    assert_declared(ctx.spec.load(), ctx.spec.create(**ctx.params))
     fitted = ctx.model
     wi, wo = adversarial_pairs(4096, torch.float64, seed=11)["uniform"]
     before = fitted.eval(wi, wo)
@@ -238,7 +202,7 @@ def check_device_agreement(ctx: Context) -> None:
     cls = ctx.spec.load()
     if "cuda" not in cls.devices:
         raise NoDevice(f"{cls.__name__} runs on the CPU only (devices = {sorted(cls.devices)})")
-    gpu = _gpu()
+    gpu = gpu_device()
     cpu_model = ctx.model
     moved = cls.from_state(dict(cpu_model.params), {k: v.detach().cpu().clone() for k, v in cpu_model.state_dict().items()},
                            cpu_model.metadata()).to(gpu)

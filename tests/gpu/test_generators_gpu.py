@@ -16,12 +16,13 @@ import yaml
 
 from brdfbench import registry
 from brdfbench.device import on_host
-from brdfbench.generator_protocol import Generator, TrainingData, WeightSet
+from brdfbench.generator_protocol import TrainingData, WeightSet
 from brdfbench.specs import GeneratorSpec
 from brdfbench.testing import check_generator
 from brdfbench.testing.adversarial import adversarial_pairs
 from brdfbench.testing.generators import generator_checks, training_data
 from brdfbench_generators.samples import TableSamples, WeightSamples
+from device_plugins import PlacedGaussian  # tests/device_plugins.py
 
 TORCH_GENERATORS = ("vae_brdf", "vae_nbrdf", "hyperdiffusion", "pca_brdf", "pca_nbrdf")
 QUICK = {"vae_brdf": {"epochs": 2}, "vae_nbrdf": {"epochs": 5}, "hyperdiffusion": {"epochs": 3},
@@ -74,39 +75,7 @@ def test_a_generator_moved_to_the_gpu_saves_and_loads_on_the_cpu(data, gpu, tmp_
 # -- what only a GPU shows: the kit's GPU check catches it ----------------------------------
 
 
-class GpuGaussian(Generator):
-    learns_from = "nbrdf"
-    devices = frozenset({"cpu", "cuda"})
-
-    def __init__(self):
-        super().__init__()
-        self.mean = self.std = None
-
-    def fit(self, data, *, seed=0, progress=False):
-        v = torch.from_numpy(data.weights().vectors).double().to(self.device)
-        self.mean, self.std = v.mean(0), v.std(0) + 1e-6
-        return self
-
-    def _move(self, device):
-        if self.mean is not None:
-            self.mean, self.std = self.mean.to(device), self.std.to(device)
-
-    def _sample(self, n, condition, seed):
-        z = torch.randn(n, self.mean.numel(), generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
-        return WeightSamples(self.mean + self.std * z.to(self.mean.device))
-
-    def sample_nbytes(self, n):
-        return 3 * 8 * n * 675
-
-    def state_dict(self):
-        return {} if self.mean is None else {"mean": self.mean, "std": self.std}
-
-    @classmethod
-    def from_state(cls, params, tensors, metadata):
-        model = cls(**params)
-        if tensors:
-            model.mean, model.std = tensors["mean"], tensors["std"]
-        return model
+GpuGaussian = PlacedGaussian
 
 
 class SamplesOnTheCpu(GpuGaussian):

@@ -4,7 +4,6 @@ shows: values left on the CPU, and a GPU fit that is not the CPU fit's equal."""
 from __future__ import annotations
 
 import pytest
-import torch
 
 from brdfbench import registry
 from brdfbench.specs import RepresentationSpec

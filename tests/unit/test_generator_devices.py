@@ -24,6 +24,7 @@ from brdfbench_generators import hyperdiffusion as hd
 from brdfbench_generators import vae
 from brdfbench_generators.pca import _median_reference, gram_pca
 from brdfbench_generators.samples import WeightSamples
+from device_plugins import PlacedGaussian  # tests/device_plugins.py
 
 TORCH_GENERATORS = ("vae_brdf", "vae_nbrdf", "hyperdiffusion", "pca_brdf", "pca_nbrdf")
 QUICK = {"vae_brdf": {"epochs": 2}, "vae_nbrdf": {"epochs": 3}, "hyperdiffusion": {"epochs": 2},
@@ -304,44 +305,6 @@ def test_a_gpu_this_machine_lacks_is_refused_naming_the_key(neumerl_parts):
 
 
 # -- the kit's device checks on the CPU ------------------------------------------------------------
-
-
-class PlacedGaussian(Generator):
-    """Per-coordinate Gaussian over NBRDF weight vectors that declares the GPU and moves its
-    state: a small correct generator for the device checks."""
-
-    learns_from = "nbrdf"
-    devices = frozenset({"cpu", "cuda"})
-
-    def __init__(self):
-        super().__init__()
-        self.mean = self.std = None
-
-    def fit(self, data, *, seed=0, progress=False):
-        v = torch.from_numpy(data.weights().vectors).double().to(self.device)
-        self.mean, self.std = v.mean(0), v.std(0) + 1e-6
-        return self
-
-    def _move(self, device):
-        if self.mean is not None:
-            self.mean, self.std = self.mean.to(device), self.std.to(device)
-
-    def _sample(self, n, condition, seed):
-        z = torch.randn(n, self.mean.numel(), generator=torch.Generator().manual_seed(seed), dtype=torch.float64)
-        return WeightSamples(self.mean + self.std * z.to(self.mean.device))
-
-    def sample_nbytes(self, n):
-        return 3 * 8 * n * 675
-
-    def state_dict(self):
-        return {} if self.mean is None else {"mean": self.mean, "std": self.std}
-
-    @classmethod
-    def from_state(cls, params, tensors, metadata):
-        model = cls(**params)
-        if tensors:
-            model.mean, model.std = tensors["mean"], tensors["std"]
-        return model
 
 
 class CpuGaussian(PlacedGaussian):
