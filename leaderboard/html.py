@@ -360,7 +360,12 @@ def published_section(report: view.Report) -> list[str]:
            "the same model and metric, with how the setups differ. A figure within a factor of "
            f"{published.AGREEMENT_FACTOR:g} of the published one (within 3 dB for PSNR; 1 − SSIM within a factor of "
            f"{published.AGREEMENT_FACTOR:g} for SSIM) is said to agree; any other does not reproduce. Timings and "
-           "throughputs are from other hardware: their ratio is not a verdict on the method.</p>"]
+           "throughputs are from other hardware: their ratio is not a verdict on the method. Under each of our "
+           "figures is the configuration that produced it, which names its recipe: <code>nbrdf</code>, "
+           "<code>naive_mlp</code>, <code>tripleplane</code>, <code>triplane_gated</code> and "
+           "<code>hyperdiffusion</code> train on this project's schedules, sized for a CPU; "
+           f"{', '.join(f'<code>{n}</code>' for n in published.PUBLISHED_RECIPES)} on the papers' own recipes "
+           "(see the README's GPUs section).</p>"]
     try:
         rows = published.compare(report)
     except (OSError, ValueError, KeyError) as exc:

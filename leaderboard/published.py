@@ -20,6 +20,9 @@ from importlib import resources
 from .view import Cell, Report, TableSection
 
 AGREEMENT_FACTOR = 2.0
+#: Configurations (conf/) that train on a source paper's own recipe rather than this
+#: project's CPU schedule: the report says which produced each of our figures.
+PUBLISHED_RECIPES = ("nbrdf_reference", "triplane_gated_paper", "tripleplane_paper", "hyperdiffusion_paper")
 FIGURES_FILE = "seed_figures.csv"
 MATCHES_FILE = "published_matches.csv"
 

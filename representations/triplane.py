@@ -121,6 +121,14 @@ class Tripleplane(Representation):
         if self.tensors is not None:  # an unfitted model holds nothing (and initialises no device)
             self.tensors = {k: v.to(device) for k, v in self.tensors.items()}
 
+    def training_bytes(self, materials: int) -> float:
+        """Estimated peak memory of one step over `materials` stacked models: every pair's
+        values kept for the backward pass (the inputs, the four bilinear corners' features of
+        each texture, the decoder's activations, the outputs), twice over for their gradients."""
+        c_h, c_d = self.shape.channels
+        per_pair = 6 + 4 * (c_h + c_d) + sum(self.shape.layer_sizes)
+        return float(self.recipe.batch_size) * materials * per_pair * 4 * 2
+
     def cpu_seconds(self) -> float:
         """The estimated time of one material's fit on a CPU (a lower bound, see CPU_TRAIN_FLOP_RATE)."""
         return tf.training_flops(self.recipe, self.shape) / CPU_TRAIN_FLOP_RATE
@@ -143,7 +151,9 @@ class Tripleplane(Representation):
             f"{self.plugin_name}: this recipe would fit on the CPU for about {_duration(seconds)} per material "
             f"({steps} of batch_size={r.batch_size:,} pairs × ~{3 * self.shape.flops():,} training FLOPs per pair "
             f"≈ {tf.training_flops(r, self.shape):.2g} FLOPs at an assumed {CPU_TRAIN_FLOP_RATE:.0e} FLOP/s; a CPU "
-            f"fit may take at most {_duration(CPU_LIMIT_S)}). Run it on a GPU (device=cuda), shorten it ({knobs}), "
+            f"fit may take at most {_duration(CPU_LIMIT_S)}), holding about "
+            f"{self.training_bytes(self.batch_materials) / 2**30:.1f} GiB for {self.batch_materials} materials a "
+            f"batch. Run it on a GPU (device=cuda), shorten it ({knobs}), "
             "or set allow_slow_cpu=true to fit on the CPU anyway")
 
     def fit(self, target: Material, *, seed: int = 0) -> "Tripleplane":

@@ -138,6 +138,10 @@ def test_published_figures_beside_ours_say_whether_they_reproduce():
     assert rows[("Table 4.1", "PSNR")].verdict == "not measured"  # no rendered section here
     page = html.render(df, "s")
     assert "seed 002 (Timonen, Kemppinen, Lehtinen)" in page and "agrees" in page
+    # the recipe behind each of our figures: the configuration is named, and the section says
+    # which configurations train on the papers' own recipes
+    assert "<code>triplane_gated_paper</code>" in page and "papers' own recipes" in page
+    assert all(name in published.PUBLISHED_RECIPES for name in ("nbrdf_reference", "hyperdiffusion_paper"))
 
 
 def test_a_published_match_without_its_row_is_reported(monkeypatch):
@@ -260,3 +264,12 @@ def test_no_split_without_a_width_for_every_one_of_ten_materials(case):
     df = df.dropna(subset=["value"])
     section = view.build(df, "s").sections[0]
     assert section.sharpness is None and "sharpest tenth" not in markdown.render(df, "s")
+
+
+def test_every_published_recipe_the_report_names_is_a_shipped_config():
+    from importlib import resources
+
+    conf = resources.files("brdfbench_conf")
+    shipped = {p.name.removesuffix(".yaml") for group in ("representation", "generator")
+               for p in conf.joinpath(group).iterdir()}
+    assert set(published.PUBLISHED_RECIPES) <= shipped
