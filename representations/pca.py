@@ -11,6 +11,11 @@ the top-k principal directions of those (mean removed), computed from their Gram
 A material is represented by 3·k coefficients (k per channel) plus the shared basis,
 mean and reference. `fit` projects a material by least squares on its valid cells, and
 evaluation looks up the reconstructed table (nearest cell, as the reference reader).
+
+On a GPU (`to(device)`) training (the median reference, the mapping, the Gram matrix and
+the basis) and the projection run there; the eigendecomposition of the small n × n Gram
+matrix and the reconstructed table stay on the host, and so does evaluation, which is the
+reference reader's lookup (values returned on the inputs' device).
 """
 
 from __future__ import annotations
@@ -46,12 +51,25 @@ def values_on_domain(material: Material) -> tuple[torch.Tensor, torch.Tensor]:
     return values, valid
 
 
+def _weights(device: torch.device) -> torch.Tensor:
+    """The domain's w = cosθi·cosθo on `device` (kept per device)."""
+    w = _domain()[1]
+    if device.type == "cpu":
+        return w
+    if device not in _WEIGHTS:
+        _WEIGHTS[device] = w.to(device)
+    return _WEIGHTS[device]
+
+
+_WEIGHTS: dict[torch.device, torch.Tensor] = {}
+
+
 def _chunked_project(centred: torch.Tensor, basis: torch.Tensor) -> torch.Tensor:
     """centred (3, P) fp64 @ basis (P, k) fp32, block by block in fp32, summed in fp64.
 
     Avoids an fp64 copy of the basis (P·k·8 bytes: 2 GB at k = 224).
     """
-    out = torch.zeros(centred.shape[0], basis.shape[1], dtype=torch.float64)
+    out = torch.zeros(centred.shape[0], basis.shape[1], dtype=torch.float64, device=basis.device)
     for i in range(0, basis.shape[0], _CHUNK):
         out += (centred[:, i : i + _CHUNK].float() @ basis[i : i + _CHUNK]).double()
     return out
@@ -66,6 +84,7 @@ def _chunked_reconstruct(coefficients: torch.Tensor, basis: torch.Tensor) -> tor
 class PCA(Representation):
     tags = frozenset({"isotropic", "reciprocal", "fittable", "tabulated", "needs_training"})
     needs_training = True
+    devices = frozenset({"cpu", "cuda"})
 
     def __init__(self, k: int | None = None):
         if k is not None and (not isinstance(k, int) or k < 1):
@@ -79,12 +98,16 @@ class PCA(Representation):
 
     # -- shared state ---------------------------------------------------------
     def _map(self, values: torch.Tensor) -> torch.Tensor:
-        _, w = _domain()
-        return logrel.to_mapped(values, self.reference.double(), w)
+        return logrel.to_mapped(values, self.reference.double(), _weights(values.device))
 
     def _unmap(self, mapped: torch.Tensor) -> torch.Tensor:
-        _, w = _domain()
-        return logrel.from_mapped(mapped, self.reference.double(), w)
+        return logrel.from_mapped(mapped, self.reference.double(), _weights(mapped.device))
+
+    def _move(self, device: torch.device) -> None:
+        for name in ("reference", "mean", "basis", "coefficients"):
+            value = getattr(self, name)
+            if value is not None:  # an unfitted model holds nothing (and initialises no device)
+                setattr(self, name, value.to(device))
 
     def train(self, materials: Iterable[Material], *, seed: int = 0) -> "PCA":
         columns, valid_masks, names = [], [], []
@@ -95,8 +118,9 @@ class PCA(Representation):
             names.append(material.name)
         if len(columns) < 2:
             raise ConfigError(f"pca: needs at least 2 training materials, got {len(columns)}")
-        stacked = torch.stack(columns)  # (n, 3, P) float32
-        valid = torch.stack(valid_masks)  # (n, P)
+        device = self.device
+        stacked = torch.stack(columns).to(device)  # (n, 3, P) float32
+        valid = torch.stack(valid_masks).to(device)  # (n, P)
         # Reference: per-cell, per-channel median over the training materials' valid values.
         masked = torch.where(valid[:, None, :], stacked, torch.full_like(stacked, float("nan")))
         reference = torch.nanmedian(masked, dim=0).values
@@ -118,13 +142,13 @@ class PCA(Representation):
         k = min(DEFAULT_MAX_K, rank) if k is None else k
         # Gram matrix and basis in fp64, a block of cells at a time (x itself stays fp32).
         chunks = [slice(i, i + _CHUNK) for i in range(0, x.shape[1], _CHUNK)]
-        gram = torch.zeros(x.shape[0], x.shape[0], dtype=torch.float64)
+        gram = torch.zeros(x.shape[0], x.shape[0], dtype=torch.float64, device=device)
         for c in chunks:
             block = x[:, c].double()
             gram += block @ block.T
-        eigvals, eigvecs = logrel.top_eigen(gram, k)
-        scale = eigvecs / eigvals.clamp_min(1e-30).sqrt()
-        self.basis = torch.empty(x.shape[1], k, dtype=torch.float32)  # (P, k), orthonormal columns
+        eigvals, eigvecs = logrel.top_eigen(gram.cpu(), k)  # n × n: on the host, as LAPACK orders it
+        scale = (eigvecs / eigvals.clamp_min(1e-30).sqrt()).to(device)
+        self.basis = torch.empty(x.shape[1], k, dtype=torch.float32, device=device)  # (P, k), orthonormal columns
         for c in chunks:
             self.basis[c] = (x[:, c].double().T @ scale).float()
         self.coefficients, self._table = None, None
@@ -134,13 +158,13 @@ class PCA(Representation):
     def fit(self, target: Material, *, seed: int = 0) -> "PCA":
         if self.basis is None:
             raise RuntimeError("pca: train() on a split of materials before fit()")
-        values, valid = values_on_domain(target)
+        values, valid = (t.to(self.device) for t in values_on_domain(target))
         centred = torch.where(valid, self._map(values) - self.mean.double(), 0.0)  # (3, P); invalid cells drop out
         rhs = _chunked_project(centred, self.basis)  # (3, k) = centred @ basis over valid cells
         invalid = ~valid
         if invalid.any():  # least squares on the valid cells: B_v'B_v = I - B_inv'B_inv
             b_inv = self.basis[invalid].double()
-            gram = torch.eye(self.basis.shape[1], dtype=torch.float64) - b_inv.T @ b_inv
+            gram = torch.eye(self.basis.shape[1], dtype=torch.float64, device=b_inv.device) - b_inv.T @ b_inv
             # Symmetric positive definite while the valid cells determine the coefficients; a
             # Cholesky solve is also deterministic, where LAPACK's threaded lstsq is not.
             factor, info = torch.linalg.cholesky_ex(gram)
@@ -162,13 +186,15 @@ class PCA(Representation):
             cells, _ = _domain()
             mapped = self.mean.double() + _chunked_reconstruct(self.coefficients, self.basis)  # (3, P)
             values = np.full((3, merl.N_CELLS), merl.INVALID_RAW, dtype=np.float64)
-            values[:, cells.numpy()] = self._unmap(mapped).numpy()
+            values[:, cells.numpy()] = self._unmap(mapped).cpu().numpy()
             valid = np.zeros(merl.N_CELLS, dtype=bool)
             valid[cells.numpy()] = True
             self._table = merl.MerlTable.from_values(values.reshape(3, *merl.SHAPE), valid.reshape(merl.SHAPE))
         return self._table
 
     def _eval(self, wi, wo):
+        if wi.device.type != "cpu":  # the reference reader's lookup runs on the host
+            return self.table.lookup(wi.cpu(), wo.cpu(), "nearest").clamp_min(0.0).to(wi.device)
         return self.table.lookup(wi, wo, "nearest").clamp_min(0.0)
 
     # -- persistence and cost -------------------------------------------------
