@@ -18,6 +18,7 @@ from omegaconf import DictConfig
 
 from .errors import BrdfbenchError
 from .hydra_callbacks import finish
+from .hydra_choices import check_group_choices
 from .hydra_config import JOB_SUMMARY, to_run_config, write_summary
 
 __all__ = ["JOB_SUMMARY", "run_hydra", "to_run_config"]
@@ -57,6 +58,11 @@ def run_hydra(argv: list[str]) -> int:
     # Hydra's parser takes flags only before the overrides; accept `-m` anywhere, as in
     # `brdfbench harness=render scene=sphere_envmap -m representation=merl,nbrdf`.
     flags = [a for a in argv if a in ("-m", "--multirun")]
+    try:
+        check_group_choices([a for a in argv if not a.startswith("-")])
+    except BrdfbenchError as exc:
+        print(f"brdfbench: error: {exc}", file=sys.stderr, flush=True)
+        return 2
     sys.argv = ["brdfbench", *flags, *(a for a in argv if a not in flags)]
     _app()
     return 0

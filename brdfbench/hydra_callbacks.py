@@ -24,20 +24,31 @@ from .errors import BrdfbenchError
 from .hydra_config import JOB_SUMMARY, to_run_config
 
 BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"
+#: brdfbench's own: the basic sweeper plus a profile's sections (hydra_plugins/brdfbench_sweeper)
+SECTION_SWEEPER = "hydra_plugins.brdfbench_sweeper.SectionSweeper"
 #: Set for the jobs of a sweep (they inherit it, whichever launcher starts them), so the
 #: end of the sweep reads its own jobs' summaries only.
 SWEEP_ENV = "BRDFBENCH_SWEEP_ID"
 
 
 def sweep_overrides(config: DictConfig) -> list[list[str]] | None:
-    """Each job's overrides, as Hydra's basic sweeper will expand them (None for other sweepers)."""
+    """Each job's overrides, as the sweeper will expand them: Hydra's basic sweeper, or
+    brdfbench's, which adds a profile's sections (None for other sweepers)."""
     from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.override_parser.overrides_parser import OverridesParser
+    from omegaconf import OmegaConf
 
-    if config.hydra.sweeper.get("_target_") != BASIC_SWEEPER:
+    target = config.hydra.sweeper.get("_target_")
+    task = list(config.hydra.overrides.task)
+    params = OmegaConf.to_container(config.hydra.sweeper.get("params") or {}, resolve=False)
+    if target == SECTION_SWEEPER:
+        from hydra_plugins.brdfbench_sweeper import job_overrides
+
+        sections = OmegaConf.to_container(config.hydra.sweeper.get("sections") or {}, resolve=False)
+        return job_overrides(params, sections, task)
+    if target != BASIC_SWEEPER:
         return None
-    params = [f"{k}={v}" for k, v in (config.hydra.sweeper.get("params") or {}).items()]
-    parsed = OverridesParser.create().parse_overrides(params + list(config.hydra.overrides.task))
+    parsed = OverridesParser.create().parse_overrides([f"{k}={v}" for k, v in params.items()] + task)
     return [job for batch in BasicSweeper.split_arguments(parsed, None) for job in batch]
 
 

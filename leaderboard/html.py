@@ -140,6 +140,10 @@ def table_section(s: TableSection, sid: str, results_dir: Path | None = None) ->
     if s.contended:
         out.append(f'<p class="note">{CONTENDED} measured while other brdfbench jobs ran on the same host: timings '
                    "are not comparable with unmarked ones.</p>")
+    if s.brief:
+        note = view.BRIEF_NOTE.replace("`brdfbench`", "<code>brdfbench</code>").replace(
+            "`brdfbench profile=full`", "<code>brdfbench profile=full</code>")
+        out.append(f'<p class="note">{", ".join(f"<code>{_e(b)}</code>" for b in s.brief)}: {note}.</p>')
     if s.accelerators:
         out.append(f'<p class="note">{ON_GPU} computed on a GPU ({_e(", ".join(s.accelerators))}): these timings are '
                    "not comparable with CPU ones, and a column that holds both marks its best among the CPU "

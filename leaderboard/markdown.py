@@ -89,6 +89,7 @@ def table_section(s: TableSection) -> list[str]:
            "with unmarked ones.", ""] if s.contended else []),
         *([f"{ON_GPU} computed on a GPU ({', '.join(s.accelerators)}): these timings are not comparable with CPU "
            "ones.", ""] if s.accelerators else []),
+        *([f"{', '.join(f'`{b}`' for b in s.brief)}: {view.BRIEF_NOTE}.", ""] if s.brief else []),
         "### Per metric",
         "",
     ]

@@ -176,6 +176,11 @@ class TableSection:
         return any(c.contended for r in self.rows for name, c in r.cells.items() if self.metrics[name].timed)
 
     @property
+    def brief(self) -> list[str]:
+        """Labels of configurations on a first look's brief recipe (`*_brief` configs)."""
+        return [r.label for r in self.rows if r.label.split(" (")[0].endswith(BRIEF_SUFFIX)]
+
+    @property
     def accelerators(self) -> list[str]:
         """The GPUs that computed some timed figure of the section (their cells are marked)."""
         return sorted({c.accelerator for r in self.rows for name, c in r.cells.items()
@@ -223,6 +228,14 @@ class Report:
     git_shas: list[str]
     sections: list  # TableSection | ConvergenceSection | generation_view.GenerationSection
     empty: bool
+
+
+#: The suffix of the first look's brief-recipe configurations (conf/representation/*_brief.yaml).
+BRIEF_SUFFIX = "_brief"
+#: What a section with brief-recipe rows says of them.
+BRIEF_NOTE = ("the first look's brief training recipes (a plain `brdfbench`, profile=first_look: 12 materials, "
+              "a few epochs): quicker and less accurate than the full recipes; `brdfbench profile=full` fits every "
+              "model with its full recipe on the 24 materials of the synthetic set")
 
 
 # --------------------------------------------------------------------------- statistics

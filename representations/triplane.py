@@ -20,6 +20,7 @@ from typing import Any, ClassVar, Sequence
 
 import torch
 
+from brdfbench import reused
 from brdfbench.errors import ConfigError, ModelFileError
 from brdfbench.protocol import FIT_LOSS_KEY, Material, Representation
 
@@ -185,7 +186,8 @@ class Tripleplane(Representation):
     def _eval(self, wi, wo):
         if self.tensors is None:
             raise RuntimeError(f"{self.plugin_name}: evaluate after fit() or load")
-        r_h, r_d, phi = tm.texture_coords(wi, wo)  # in wi's dtype, as the CPU figures always were
+        # in wi's dtype, as the CPU figures always were; once per process at a harness's directions
+        r_h, r_d, phi = reused.derived(tm.texture_coords, wi, wo)
         dtype = wi.dtype
         stacked = {k: (v.to(dtype)[None, None] if k.startswith("b") else v.to(dtype)[None])
                    for k, v in self.tensors.items()}

@@ -570,8 +570,9 @@ def synthetic_dataset(size: str | int = "default", seed: int = 0, cache_dir: str
     Beside each cache file, `NAME.binary.sha256` records the digest of the file as generated.
     A cache file whose content no longer matches it (edited, replaced, damaged) is
     regenerated with a warning; one without a record (an older cache) is regenerated and
-    compared. The fingerprint is the generator version and seed: the same data whatever
-    the state of the cache.
+    compared. The fingerprint is the generator version, the seed and, for a set of other
+    than the default 24 materials, its size (a set of 12 is other data than a set of 24:
+    a report ranks each apart): the same data whatever the state of the cache.
     """
     n = _resolve_size(size)
     _check_seed(seed)
@@ -631,6 +632,6 @@ def synthetic_dataset(size: str | int = "default", seed: int = 0, cache_dir: str
         name="synthetic",
         materials=tuple(p.name for p in params),
         loader=load,
-        fingerprint=f"synthetic-{GENERATOR_VERSION}-seed{seed}",
+        fingerprint=f"synthetic-{GENERATOR_VERSION}-seed{seed}" + ("" if n == SIZES["default"] else f"-n{n}"),
         categories={p.name: p.category for p in params},
     )

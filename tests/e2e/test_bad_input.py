@@ -125,3 +125,14 @@ def test_inspect_of_a_model_naming_another_representation_is_one_line(tmp_path, 
     safetensors.torch.save_file({"albedo": torch.ones(3)}, str(path), metadata={"brdfbench": json.dumps(header)})
     line = one_error_line(cli("inspect", str(path), cwd=tmp_path))
     assert str(path) in line and "'bogus'" in line and "it takes: no params" in line
+
+
+@pytest.mark.parametrize("override, named", [
+    ("profile=nope", "profile='nope': no such profile config; expected one of first_look, full"),
+    ("dataset=nope", "dataset='nope': no such dataset config; expected one of "),
+    ("representation=lambert,lambret", "representation='lambret': no such representation config"),
+])
+def test_an_unknown_config_choice_is_one_line_naming_the_group_and_its_options(tmp_path, override, named, cli):
+    out = cli(override, f"results_dir={tmp_path / 'res'}", cwd=tmp_path)
+    assert named in one_error_line(out)
+    assert not (tmp_path / "res").exists()

@@ -11,24 +11,28 @@ import pytest
 from brdfbench.store import ResultsStore
 
 QUICK = ["dataset.params.size=small", "harness=quick", "limit=3"]
+FIRST_LOOK = ("merl", "lambert", "blinn_phong", "cook_torrance", "ggx", "pca", "nbrdf_brief", "naive_mlp_brief",
+              "tripleplane_brief", "triplane_gated_brief")
 
 
 def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path, cli_process, cli):
-    """The default sweep as a user starts it, in a fresh interpreter: the one full end-to-end run
-    (every built-in representation with its default recipe, on three materials: the fewest
-    pca's cross-validation takes, two training materials per fold)."""
+    """The default sweep (the first look) as a user starts it, in a fresh interpreter: every
+    built-in representation, the neural ones on their brief recipes, on three materials (the
+    fewest pca's cross-validation takes, two training materials per fold); `harness=quick` on
+    the command line leaves the render section out."""
     out = cli_process(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     board = (tmp_path / "res" / "leaderboard.md").read_text()
-    for name in ("merl", "lambert", "blinn_phong", "cook_torrance", "ggx", "pca", "nbrdf", "naive_mlp"):
+    for name in FIRST_LOOK:
         assert f"`{name}`" in board, name
     assert "fit time (s)" in board and "evals/s" in board and "bytes" in board
-    assert out.stdout.count(": 3 done") == 8
+    assert "the first look's brief training recipes" in board and "profile=full" in board
+    assert out.stdout.count(": 3 done") == len(FIRST_LOOK)
     page = (tmp_path / "res" / "leaderboard.html").read_text(encoding="utf-8")
     assert "Accuracy against cost" in page and "<svg" in page and "Lobes: in-plane slices" in page
     again = cli(*QUICK, f"results_dir={tmp_path}/res", cwd=tmp_path)  # the second run, in this process
     assert again.returncode == 0, again.stderr
-    assert again.stdout.count("0 done, 3 already in the store") == 8
+    assert again.stdout.count("0 done, 3 already in the store") == len(FIRST_LOOK)
 
 
 def test_explicit_multirun_sweep(tmp_path, cli):

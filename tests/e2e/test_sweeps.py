@@ -27,7 +27,10 @@ def test_a_bad_override_in_any_job_fails_before_any_work(tmp_path, cli):
 
     out = cli("-m", "representation=lambert,lambret", *SMALL, "limit=1", f"results_dir={res}", cwd=tmp_path)
     assert out.returncode == 2
-    assert "job 1" in out.stderr and "lambret" in out.stderr
+    assert out.stderr.strip().splitlines() == [
+        "brdfbench: error: representation='lambret': no such representation config; expected one of "
+        + out.stderr.split("expected one of ", 1)[1].strip()]
+    assert "lambert" in out.stderr.split("expected one of ", 1)[1]
     assert not (res / "brdfbench.sqlite").exists()
 
 

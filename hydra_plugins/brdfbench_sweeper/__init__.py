@@ -1,0 +1,83 @@
+"""Hydra sweeper plugin: Hydra's basic sweeper plus a profile's extra sections.
+
+A profile (`conf/profile/*.yaml`) names the jobs of a plain `brdfbench`: the main sweep
+(`hydra.sweeper.params`, expanded exactly as Hydra's basic sweeper does) and, in
+`hydra.sweeper.sections`, further sweeps of their own (e.g. a few representations rendered
+under an environment map), each a mapping of override keys to values (sweep syntax
+allowed). A section's jobs run after the main sweep's, with the command line's overrides
+applied on top. Where the command line chooses what to measure itself (it sets
+`representation`, `generator`, `harness` or `scene`), the sections are left out: `brdfbench
+representation=lambert` is that one job.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+from hydra.core.override_parser.overrides_parser import OverridesParser
+
+#: Command-line keys that choose what a run measures: with any of them, sections are left out.
+SELECTORS = frozenset({"representation", "generator", "harness", "scene"})
+
+
+def _key(override: str) -> str:
+    key = override.split("=", 1)[0].lstrip("+~")
+    return key.split("@", 1)[0]
+
+
+def _text(value: Any) -> str:
+    """A config value as override syntax (null, true/false; strings and sweeps as written)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+def job_overrides(params: Mapping[str, Any] | None, sections: Mapping[str, Mapping[str, Any]] | None,
+                  arguments: Sequence[str], parser: OverridesParser | None = None) -> list[list[str]]:
+    """Every job's overrides: the main sweep, then each section's (see the module docstring)."""
+    parser = parser or OverridesParser.create()
+    main = [f"{k}={_text(v)}" for k, v in (params or {}).items()]
+    groups = [main]
+    if not any(_key(a) in SELECTORS for a in arguments):
+        for section in (sections or {}).values():
+            groups.append([f"{k}={_text(v)}" for k, v in (section or {}).items()])
+    jobs: list[list[str]] = []
+    for group in groups:
+        parsed = parser.parse_overrides(group + list(arguments))
+        jobs += [job for batch in BasicSweeper.split_arguments(parsed, None) for job in batch]
+    return jobs
+
+
+class SectionSweeper(BasicSweeper):
+    """Hydra's basic sweeper over the main sweep and a profile's sections, in one batch."""
+
+    def __init__(self, max_batch_size: int | None = None, params: Mapping[str, str] | None = None,
+                 sections: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+        super().__init__(max_batch_size=max_batch_size, params=dict(params or {}))
+        self.sections = {k: dict(v or {}) for k, v in (sections or {}).items()}
+
+    def sweep(self, arguments: list[str]) -> Any:
+        from pathlib import Path
+
+        from omegaconf import OmegaConf
+
+        assert self.config is not None and self.launcher is not None and self.hydra_context is not None
+        parser = OverridesParser.create(config_loader=self.hydra_context.config_loader)
+        jobs = job_overrides(self.params, self.sections, arguments, parser)
+        self.overrides = list(BasicSweeper.split_overrides_to_chunks(jobs, self.max_batch_size))
+        sweep_dir = Path(self.config.hydra.sweep.dir)
+        sweep_dir.mkdir(parents=True, exist_ok=True)
+        OmegaConf.save(self.config, sweep_dir / "multirun.yaml")
+        returns, index = [], 0
+        while not self.is_done():
+            batch = self.get_job_batch()
+            self.validate_batch_is_legal(batch)
+            results = self.launcher.launch(batch, initial_job_idx=index)
+            for r in results:
+                _ = r.return_value  # raise a job's exception here, as the basic sweeper does
+            index += len(batch)
+            returns.append(results)
+        return returns
