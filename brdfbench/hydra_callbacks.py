@@ -20,6 +20,7 @@ from typing import Any
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
+from . import parallelism
 from .errors import BrdfbenchError
 from .hydra_config import JOB_SUMMARY, to_run_config
 
@@ -114,6 +115,12 @@ class SweepCallback(Callback):
 
     def on_multirun_start(self, config: DictConfig, config_name: str | None = None, **kwargs: Any) -> None:
         os.environ[SWEEP_ENV] = uuid.uuid4().hex
+        try:  # the sweep's own keys: one line, not one per job
+            parallelism.count("workers", config.get("workers", "auto"))
+            parallelism.count("threads", config.get("threads", "auto"))
+        except BrdfbenchError as exc:
+            print(f"brdfbench: error: {exc}", file=sys.stderr, flush=True)
+            raise SystemExit(2) from None
         jobs = sweep_overrides(config)
         self.expected = None if jobs is None else len(jobs)
         problems = validate_jobs(config, config_name)

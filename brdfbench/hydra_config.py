@@ -4,11 +4,13 @@ sweep's end reads (`brdfbench_job.json` in the job's Hydra output folder)."""
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from . import parallelism
 from .errors import ConfigError
 from .runner import RunConfig, harness_config
 
@@ -16,7 +18,7 @@ JOB_SUMMARY = "brdfbench_job.json"
 #: Top-level keys of config.yaml besides the groups; anything else is a typo.
 TOP_LEVEL = {"representation", "generator", "dataset", "harness", "scene", "seed", "materials", "limit", "results_dir",
              "save_models",
-             "isolate", "progress", "store", "store_params", "device"}
+             "isolate", "progress", "store", "store_params", "device", "workers", "threads"}
 
 
 def _section(cfg: DictConfig, key: str) -> dict:
@@ -104,9 +106,22 @@ def to_run_config(cfg: DictConfig, job: str = "") -> RunConfig:
         isolate=_value(cfg, "isolate", True),
         progress=_value(cfg, "progress", "auto"),
         device=_value(cfg, "device", "auto"),
-        launcher=choices.get("hydra/launcher", "basic"),
+        threads=_threads(cfg),
+        launcher=_launcher(choices),
         job=job,
     )
+
+
+def _threads(cfg: DictConfig) -> int | None:
+    """The job's thread count (None: torch's default); `workers` is checked here too."""
+    parallelism.count("workers", _value(cfg, "workers", "auto"))
+    return parallelism.count("threads", _value(cfg, "threads", "auto"))
+
+
+def _launcher(choices: dict) -> str:
+    """The launcher recorded with the job's figures: the sweeper's own parallel launch, else the choice."""
+    launcher = choices.get("hydra/launcher", "basic")
+    return os.environ.get(parallelism.LAUNCHER_ENV, launcher) if launcher == "basic" else launcher
 
 
 def write_summary(folder: Path, summary: dict[str, Any]) -> None:

@@ -18,7 +18,7 @@ from .pipeline.execute import execute, job_state
 from .pipeline.plan import check, make_plan, plan_folds
 from .pipeline.progress import Progress
 from .pipeline.record import Recorder
-from .pipeline.worker import shared_worker
+from .pipeline.worker import apply_threads, shared_worker
 
 __all__ = ["RunConfig", "harness_config", "plan_folds", "run"]
 
@@ -76,6 +76,8 @@ def _run_inline(cfg: RunConfig, plan, recorder: Recorder, on_cell, on_note) -> N
 
     log.warning("isolate=false: cells run in this process with no time limit")
     state = job_state(cfg)
+    if cfg.threads:
+        apply_threads(cfg.threads)
     recorder.environment(environment(torch.get_num_threads(), cfg.launcher, state.recorded_device))
     marker = ActiveMarker()
 

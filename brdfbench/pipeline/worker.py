@@ -241,7 +241,8 @@ def _worker_main(conn) -> None:
     from .environment import ActiveMarker
     from .execute import execute, job_state
 
-    conn.send(("threads", torch.get_num_threads()))
+    default_threads = torch.get_num_threads()
+    conn.send(("threads", default_threads))
     states: dict = {}
     marker = ActiveMarker()
     while True:
@@ -260,12 +261,28 @@ def _worker_main(conn) -> None:
                 if key not in states:
                     states.clear()  # one job's state at a time: what it built can be large
                     states[key] = job_state(job)
+                conn.send(("threads", apply_threads(job.threads or default_threads)))
                 conn.send(("device", states[key].recorded_device))
                 execute(job, task, states[key], conn.send, marker.count)
         except BrdfbenchError as exc:
             conn.send(("fatal", _portable(exc)))
         conn.send(("threads", torch.get_num_threads()))
         conn.send(("done",))
+
+
+def apply_threads(n: int) -> int:
+    """Run torch (and numba, where loaded) on `n` threads; the count torch then uses."""
+    import torch
+
+    if torch.get_num_threads() != n:
+        torch.set_num_threads(n)
+    numba = sys.modules.get("numba")
+    if numba is not None:
+        try:
+            numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+        except Exception:  # a numba without a threading layer: it keeps its own count
+            pass
+    return torch.get_num_threads()
 
 
 def _portable(exc: BrdfbenchError) -> BrdfbenchError:

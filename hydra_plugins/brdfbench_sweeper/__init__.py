@@ -8,6 +8,11 @@ allowed). A section's jobs run after the main sweep's, with the command line's o
 applied on top. Where the command line chooses what to measure itself (it sets
 `representation`, `generator`, `harness` or `scene`), the sections are left out: `brdfbench
 representation=lambert` is that one job.
+
+With Hydra's basic launcher (the default) and more than one job, `workers` jobs run at once
+(brdfbench.parallelism: auto is one at a time below four cores) in joblib's process pool,
+each on `threads` torch threads; every cell records its threads and how many brdfbench
+workers ran beside it, and `workers=1` runs the jobs one after another on every core.
 """
 
 from __future__ import annotations
@@ -51,13 +56,51 @@ def job_overrides(params: Mapping[str, Any] | None, sections: Mapping[str, Mappi
     return jobs
 
 
+def _basic_launcher(launcher: Any) -> bool:
+    return type(launcher).__name__ == "BasicLauncher"
+
+
 class SectionSweeper(BasicSweeper):
-    """Hydra's basic sweeper over the main sweep and a profile's sections, in one batch."""
+    """Hydra's basic sweeper over the main sweep and a profile's sections, in one batch;
+    parallel jobs where the machine has the cores (see the module docstring)."""
 
     def __init__(self, max_batch_size: int | None = None, params: Mapping[str, str] | None = None,
                  sections: Mapping[str, Mapping[str, Any]] | None = None) -> None:
         super().__init__(max_batch_size=max_batch_size, params=dict(params or {}))
         self.sections = {k: dict(v or {}) for k, v in (sections or {}).items()}
+        self.task_function = None
+
+    def setup(self, *, hydra_context, task_function, config) -> None:
+        super().setup(hydra_context=hydra_context, task_function=task_function, config=config)
+        self.task_function = task_function
+
+    def _parallel(self, jobs: list[list[str]]) -> tuple[Any, list[list[str]]]:
+        """The launcher for `jobs` and their overrides: joblib's pool with each job's thread
+        count where several jobs run at once, else the configured launcher unchanged."""
+        import os
+
+        from brdfbench import parallelism
+        from brdfbench.errors import ConfigError
+
+        try:
+            workers, threads = parallelism.resolve(self.config.get("workers", "auto"), self.config.get("threads", "auto"),
+                                                   len(jobs))
+        except ConfigError:
+            return self.launcher, jobs  # the jobs' validation reports it
+        if workers < 2 or not _basic_launcher(self.launcher):
+            return self.launcher, jobs
+        try:
+            from hydra_plugins.hydra_joblib_launcher.joblib_launcher import JoblibLauncher
+        except ImportError:
+            return self.launcher, jobs  # without joblib's plugin the jobs run one at a time
+        launcher = JoblibLauncher(n_jobs=workers, backend="loky", prefer="processes", batch_size=1,
+                                  pre_dispatch="n_jobs")
+        launcher.setup(hydra_context=self.hydra_context, task_function=self.task_function, config=self.config)
+        os.environ[parallelism.LAUNCHER_ENV] = f"parallel:{workers}"
+        print(f"brdfbench: {len(jobs)} jobs, {workers} at a time on {threads} threads each "
+              "(workers=1: one at a time, exclusive timings)", flush=True)
+        given = any(_key(a) == "threads" for a in jobs[0]) if jobs else True
+        return launcher, jobs if given else [job + [f"threads={threads}"] for job in jobs]
 
     def sweep(self, arguments: list[str]) -> Any:
         from pathlib import Path
@@ -67,6 +110,7 @@ class SectionSweeper(BasicSweeper):
         assert self.config is not None and self.launcher is not None and self.hydra_context is not None
         parser = OverridesParser.create(config_loader=self.hydra_context.config_loader)
         jobs = job_overrides(self.params, self.sections, arguments, parser)
+        launcher, jobs = self._parallel(jobs)
         self.overrides = list(BasicSweeper.split_overrides_to_chunks(jobs, self.max_batch_size))
         sweep_dir = Path(self.config.hydra.sweep.dir)
         sweep_dir.mkdir(parents=True, exist_ok=True)
@@ -75,7 +119,7 @@ class SectionSweeper(BasicSweeper):
         while not self.is_done():
             batch = self.get_job_batch()
             self.validate_batch_is_legal(batch)
-            results = self.launcher.launch(batch, initial_job_idx=index)
+            results = launcher.launch(batch, initial_job_idx=index)
             for r in results:
                 _ = r.return_value  # raise a job's exception here, as the basic sweeper does
             index += len(batch)

@@ -136,3 +136,12 @@ def test_an_unknown_config_choice_is_one_line_naming_the_group_and_its_options(t
     out = cli(override, f"results_dir={tmp_path / 'res'}", cwd=tmp_path)
     assert named in one_error_line(out)
     assert not (tmp_path / "res").exists()
+
+
+@pytest.mark.parametrize("override", ["workers=0", "workers=-2", "workers=100000", "threads=0", "threads=100000",
+                                      "threads=many"])
+def test_a_bad_worker_or_thread_count_is_one_line_with_the_range(tmp_path, override, cli):
+    out = cli(override, "representation=lambert", f"results_dir={tmp_path / 'res'}", cwd=tmp_path)
+    line = one_error_line(out)
+    assert line.startswith(f"brdfbench: error: {override.split('=')[0]}=") and "expected auto or a whole number from 1 to" in line
+    assert not (tmp_path / "res").exists()

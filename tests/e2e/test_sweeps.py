@@ -170,3 +170,26 @@ def test_two_launchers_write_one_store_without_loss_or_duplicates(tmp_path):
     assert df.groupby(["material", "metric"]).size().max() == 1
     assert set(df.launcher) <= {"brdfbench_joblib", "basic"} and (df.status == "ok").all()
     assert "`lambert`" in (res / "leaderboard.md").read_text()
+
+
+def test_parallel_jobs_record_their_threads_and_neighbours(tmp_path, cli_process):
+    """workers=2 threads=1: two jobs at once in joblib's pool, without a launcher flag; each
+    cell records one thread and, while both ran, two busy workers; the figures are the
+    sequential run's."""
+    res, seq = tmp_path / "res", tmp_path / "seq"
+    args = ["-m", "representation=lambert,merl", *SMALL, "limit=2"]
+    out = cli_process(*args, "workers=2", "threads=1", f"results_dir={res}", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "2 jobs, 2 at a time on 1 threads each" in out.stdout
+    df = ResultsStore(res / "brdfbench.sqlite").frame()
+    assert set(df.threads) == {1} and set(df.launcher) == {"parallel:2"}
+    assert df.concurrent_jobs.max() == 2
+    again = cli_process(*args, "workers=1", f"results_dir={seq}", cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    one = ResultsStore(seq / "brdfbench.sqlite").frame()
+    assert set(one.launcher) == {"basic"} and set(one.concurrent_jobs) == {1}
+    keep = ~df.metric.isin(["fit_time", "evals_per_s", "peak_rss_fit", "peak_rss_eval"])
+    key = ["representation", "material", "metric"]
+    a = df[keep].set_index(key)["value"].sort_index()
+    b = one[~one.metric.isin(["fit_time", "evals_per_s", "peak_rss_fit", "peak_rss_eval"])].set_index(key)["value"].sort_index()
+    assert a.equals(b)
