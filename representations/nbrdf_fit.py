@@ -5,16 +5,23 @@ uniformly in (θh, θd, φd) — the BRDF-aware sampling of Sztrajman et al. (20
 many samples near the specular peak (small θh) — with pairs below the horizon dropped
 for all, and each material's invalid (negative) cells dropped for it alone. The weights
 of M materials are stacked (M, in, out); a minibatch of B samples runs through all of
-them as batched matrix products, and a hand-written Adam updates the stack. Each
-material's loss is normalised by its own valid-sample count, so the gradients of
-different materials never mix: a material's fit does not depend on its batch-mates
-(`fit_batched` of one material is the one-at-a-time loop, same arithmetic).
+them as batched matrix products, and a hand-written Adam updates the stack. On the CPU the
+forward and backward passes are hand-written too (`_CpuEpochs`: autograd's bookkeeping and
+temporaries cost more than the arithmetic of these small networks); `engine="autograd"` is
+the reference they are tested against. Each material's loss is normalised by its own
+valid-sample count, so the gradients of different materials never mix: a material's fit
+does not depend on its batch-mates (`fit_batched` of one material is the one-at-a-time
+loop, same arithmetic).
 
 Loss: mean |log(1 + f cos θi) − log(1 + f̂ cos θi)| over valid samples and channels (L1, the
 published one); "l2" descends the mean squared difference instead, and "l1_or_l2" fits
 with each from the same start on the same samples and keeps, per material, the fit whose
-final L1 loss is lower. The epoch losses that the early stop and `Outcome.loss` read are
-always L1, so fits by either loss compare. Why the naive MLP needs it: see its class.
+final L1 loss is lower. "l1_then_l2" fits with L1 and refits with L2 (same start, same
+samples) only the materials whose L1 fit collapsed — its final loss above `COLLAPSE_RATIO`
+times the best constant BRDF's (`collapse_ratio`) — then keeps the lower
+L1 loss as "l1_or_l2" does, at the cost of one fit where nothing collapsed. The epoch
+losses that the early stop and `Outcome.loss` read are always L1, so fits by either loss
+compare. Why the naive MLP needs it: see its class.
 With output="log" (the default) the prediction is computed from the last layer's z as
 log(1 + expm1(z) c) = logaddexp(z + log c, log(1 − c)): exact, finite for any z (no fp32
 overflow), and with a gradient everywhere — unlike the reference's relu(expm1(z)),
@@ -38,11 +45,13 @@ Adam update only; a GPU fit is not the CPU fit bit for bit (see tests/gpu).
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
 
+import numpy as np
 import torch
 from tqdm.auto import tqdm
 
@@ -53,13 +62,19 @@ from brdfbench.nbrdf import network as net
 SCHEDULES = ("onecycle", "constant")
 OUTPUTS = ("log", "clamped")
 SAMPLINGS = ("uniform", "peak")
-LOSSES = ("l1", "l2", "l1_or_l2")
+LOSSES = ("l1", "l2", "l1_or_l2", "l1_then_l2")
+ENGINES = ("manual", "autograd")  # the CPU steps: hand-written, or torch autograd (the reference)
 ADAM_BETAS = (0.9, 0.999)
 ADAM_EPS = 1e-7  # Keras' default, as the reference recipe used
 ONECYCLE_WARMUP = 0.1  # fraction of the steps spent warming up
 ONECYCLE_START_DIV = 25.0  # the warm-up starts at lr / 25
 ONECYCLE_END_DIV = 1e4  # and the cosine anneal ends at lr / 1e4
 COS_MIN = 1e-7  # cos θi is clamped into [COS_MIN, 1 − 2⁻²⁴] inside the log-space loss
+#: "l1_then_l2" refits with L2 where the L1 fit's final loss is above this fraction of the best
+#: constant BRDF's loss: a collapsed fit is no better than the diffuse-only prediction (its ratio
+#: near 1), a healthy one about four times better or more (see NaiveMLP for the figures).
+COLLAPSE_RATIO = 0.25
+COLLAPSE_SAMPLES = 20_000  # training pairs (the first ones drawn) that the best constant is fitted to
 
 log = logging.getLogger(__name__)
 #: Tests set this to run the GPU path's arithmetic (scheduled Adam, index gathers, device
@@ -80,7 +95,9 @@ class Recipe:
     patience: int | None = 2
     min_improvement: float = 5e-3
     sampling: str = "uniform"  # θh of the training pairs: "uniform", or "peak" (θh = u²·π/2, MERL's spacing)
-    loss: str = "l1"  # "l1", "l2" (squared log error), or "l1_or_l2" (both fits, the lower L1 loss kept)
+    # "l1", "l2" (squared log error), "l1_or_l2" (both fits, the lower L1 loss kept), or
+    # "l1_then_l2" (the L2 fit only where the L1 fit collapsed, then the lower L1 loss kept)
+    loss: str = "l1"
 
     def __post_init__(self):
         def bad(key, why):
@@ -143,6 +160,13 @@ def draw_samples(n: int, features: str, seed: int, sampling: str = "uniform") ->
     return Samples(x=x.to(torch.float32), cos_i=wi[:, 2].to(torch.float32), cells=cells)
 
 
+@functools.lru_cache(maxsize=2)
+def _drawn(n: int, features: str, seed: int, sampling: str) -> Samples:
+    """`draw_samples`, kept for the next call: the runner fits a sweep's batches one after
+    another from the same draw (the fitters only read the samples)."""
+    return draw_samples(n, features, seed, sampling)
+
+
 def targets(table: merl.MerlTable, samples: Samples, output_scale: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """log(1 + f cos θi) (S, 3) float32 of one material in the network's units, and its valid mask (S,)."""
     values = torch.from_numpy(table.values.reshape(3, -1))[:, samples.cells].T  # (S, 3) float64, 1/sr
@@ -166,12 +190,48 @@ def predict_log(z: torch.Tensor, log_c: torch.Tensor, log_1mc: torch.Tensor, out
 @dataclass
 class Outcome:
     """One material's fitted weights, its final training loss (the L1 loss, whatever loss was
-    descended), the epochs it ran and the loss it descended."""
+    descended), the epochs it ran, the loss it descended, the losses it was fitted with and,
+    for "l1_then_l2", the L1 fit's `collapse_ratio`."""
 
     weights: dict[str, torch.Tensor]
     loss: float
     epochs: int
     descended: str = "l1"
+    fitted: tuple[str, ...] = ("l1",)
+    collapse: float | None = None
+
+
+@torch.no_grad()
+def constant_loss(tables: Sequence[merl.MerlTable], samples: Samples, output_scale: torch.Tensor | None = None,
+                  n: int = COLLAPSE_SAMPLES, iterations: int = 30) -> torch.Tensor:
+    """(M,) the L1 training loss of each table's best constant BRDF (one value per channel: the
+    diffuse-only prediction), on the first `n` training pairs: a golden-section search over
+    log f per channel (each pair's term falls, then rises, in it)."""
+    scale = torch.ones(3) if output_scale is None else output_scale.detach().cpu().to(torch.float32)
+    head = Samples(x=samples.x[:n], cos_i=samples.cos_i[:n], cells=samples.cells[:n])
+    ys, valids = zip(*(targets(t, head, scale) for t in tables))
+    y, valid = torch.stack(ys, dim=1), torch.stack(valids, dim=1).to(torch.float32)  # (n, M, 3), (n, M)
+    count = valid.sum(dim=0).clamp(min=1)
+    c = head.cos_i.clamp(COS_MIN, 1 - 2.0**-24)[:, None, None]
+
+    def loss(log_f):  # (M, 3) -> (M, 3) mean over valid pairs
+        return ((torch.log1p(log_f.exp() * c) - y).abs() * valid[:, :, None]).sum(dim=0) / count[:, None]
+
+    ratio = (math.sqrt(5) - 1) / 2
+    lo, hi = torch.full((len(tables), 3), -16.0), torch.full((len(tables), 3), 10.0)
+    for _ in range(iterations):
+        a, b = hi - ratio * (hi - lo), lo + ratio * (hi - lo)
+        left = loss(a) < loss(b)
+        hi, lo = torch.where(left, b, hi), torch.where(left, lo, a)
+    return loss((lo + hi) / 2).mean(dim=1)
+
+
+def collapse_ratio(tables: Sequence[merl.MerlTable], losses: Sequence[float], samples: Samples,
+                   output_scale: torch.Tensor | None = None) -> list[float]:
+    """Each fit's final L1 loss over its table's best constant BRDF's (`constant_loss`): near 1
+    where the fit collapsed to the diffuse-only solution, far below where it found the lobe."""
+    const = constant_loss(tables, samples, output_scale)
+    return [float(loss) / max(float(c), 1e-12) for loss, c in zip(losses, const)]
 
 
 def one_cycle(peak: float, step: int, total: int) -> float:
@@ -295,13 +355,15 @@ def fit_batched(
     on_epoch: Callable[[int, torch.Tensor], None] | None = None,
     device: torch.device | str = "cpu",
     cuda_graphs: bool = True,
+    engine: str = "manual",
 ) -> list[Outcome]:
     """Fit one network per table, all in one pass; `inits` gives each one's initial weights.
 
     `samples` may be passed in to share one draw across several calls (it must match
     `recipe.n_samples`, `features` and `sample_seed`); `on_epoch(epoch, losses)` sees the
     epoch losses (on the CPU) of the still active materials. `device`: where to compute;
-    the outcomes' weights live there.
+    the outcomes' weights live there. `engine` (CPU only, not a config key): "manual", the
+    hand-written forward and backward pass, or "autograd", the reference it is tested against.
     """
     if len(tables) != len(inits) or not tables:
         raise ValueError(f"fit_batched needs one initial weight dict per table, got {len(inits)} for {len(tables)}")
@@ -313,13 +375,23 @@ def fit_batched(
         if list(w) != names or net.hidden_of(w) != hidden:
             raise ValueError("every initial weight dict must have the same layout")
     if samples is None:
-        samples = draw_samples(recipe.n_samples, features, sample_seed, recipe.sampling)
-    if recipe.loss == "l1_or_l2":
-        runs = [fit_batched(tables, inits, features=features, recipe=replace(recipe, loss=loss), output_scale=output_scale,
-                            sample_seed=sample_seed, samples=samples, progress=progress, on_epoch=on_epoch,
-                            device=device, cuda_graphs=cuda_graphs)
-                for loss in ("l1", "l2")]
-        return [min(pair, key=lambda o: o.loss) for pair in zip(*runs)]  # ties: the L1 fit
+        samples = _drawn(recipe.n_samples, features, sample_seed, recipe.sampling)
+    if recipe.loss in ("l1_or_l2", "l1_then_l2"):
+        kw = dict(features=features, output_scale=output_scale, sample_seed=sample_seed, samples=samples,
+                  progress=progress, on_epoch=on_epoch, device=device, cuda_graphs=cuda_graphs, engine=engine)
+        first = fit_batched(tables, inits, recipe=replace(recipe, loss="l1"), **kw)
+        if recipe.loss == "l1_or_l2":
+            second = fit_batched(tables, inits, recipe=replace(recipe, loss="l2"), **kw)
+            return [replace(min(pair, key=lambda o: o.loss), fitted=("l1", "l2")) for pair in zip(first, second)]  # ties: L1
+        ratios = collapse_ratio(tables, [o.loss for o in first], samples, output_scale)
+        refit = [i for i, r in enumerate(ratios) if r > COLLAPSE_RATIO]
+        second = dict(zip(refit, fit_batched([tables[i] for i in refit], [inits[i] for i in refit],
+                                             recipe=replace(recipe, loss="l2"), **kw))) if refit else {}
+        out = []
+        for i, (one, r) in enumerate(zip(first, ratios)):
+            kept = min((one, second[i]), key=lambda o: o.loss) if i in second else one  # ties: the L1 fit
+            out.append(replace(kept, fitted=("l1", "l2") if i in second else ("l1",), collapse=r))
+        return out
     n_samples = samples.x.shape[0]
     log_targets, valid = zip(*(targets(t, samples, scale) for t in tables))
     # Sample-major (S, M, 3) and (S, M): each epoch's shuffle gathers whole rows, several
@@ -332,11 +404,15 @@ def fit_batched(
     cos = samples.cos_i.clamp(COS_MIN, 1 - 2.0**-24)
     log_c, log_1mc = torch.log(cos), torch.log1p(-cos)
 
-    stack = _Stack(inits, names, device)
+    if engine not in ENGINES:
+        raise ValueError(f"fit_batched: engine={engine!r}, expected one of {', '.join(ENGINES)}")
     steps_per_epoch = math.ceil(n_samples / recipe.batch_size)
     total_steps = recipe.epochs * steps_per_epoch
-    if device.type == "cpu" and not _DEVICE_PATH_ON_CPU:
-        epochs = _CpuEpochs(stack, recipe, samples.x, log_c, log_1mc, y, mask, total_steps)
+    on_cpu = device.type == "cpu" and not _DEVICE_PATH_ON_CPU
+    stack = _FlatStack(inits, names) if on_cpu and engine == "manual" else _Stack(inits, names, device)
+    if on_cpu:
+        kind = _CpuEpochs if engine == "manual" else _AutogradEpochs
+        epochs = kind(stack, recipe, samples.x, log_c, log_1mc, y, mask, total_steps)
     else:
         epochs = _DeviceEpochs(stack, recipe, samples.x, log_c, log_1mc, y, mask, total_steps, device, cuda_graphs)
     active = torch.arange(len(tables))
@@ -365,7 +441,7 @@ def fit_batched(
             done = torch.zeros(len(active), dtype=torch.bool)
         for row in torch.nonzero(done).flatten().tolist():
             i = int(active[row])
-            outcomes[i] = Outcome(stack.weights(row), float(last_loss[i]), epoch + 1, recipe.loss)
+            outcomes[i] = Outcome(stack.weights(row), float(last_loss[i]), epoch + 1, recipe.loss, (recipe.loss,))
         if done.any() and not final:
             rows = torch.nonzero(~done).flatten()
             stack.keep(rows)
@@ -378,8 +454,9 @@ def fit_batched(
     return [o for o in outcomes if o is not None]
 
 
-class _CpuEpochs:
-    """The epochs of a fit on the CPU: eager steps with host scalars."""
+class _AutogradEpochs:
+    """The epochs of a fit on the CPU by torch autograd: eager steps with host scalars. The
+    reference that the hand-written `_CpuEpochs` is tested and benchmarked against."""
 
     def __init__(self, stack, recipe, x, log_c, log_1mc, y, mask, total_steps):
         self.stack, self.recipe, self.total = stack, recipe, total_steps
@@ -389,27 +466,225 @@ class _CpuEpochs:
     def keep(self, rows: torch.Tensor) -> None:
         self.y, self.mask = self.y[:, rows], self.mask[:, rows]
 
+    def _backward(self, x, log_c, log_1mc, y, mask) -> tuple[torch.Tensor, torch.Tensor]:
+        """The gradients of one minibatch into the stack's .grad; its (M,) summed L1 errors and counts."""
+        recipe = self.recipe
+        z = self.stack.forward(x)  # (M, B, 3)
+        pred = predict_log(z, log_c[:, None], log_1mc[:, None], recipe.output)
+        m = mask.T.contiguous()  # (M, B)
+        diff = pred - y.transpose(0, 1).contiguous()
+        err = diff.abs().mean(dim=2) * m  # (M, B)
+        count = m.sum(dim=1)
+        descended = diff.square().mean(dim=2) * m if recipe.loss == "l2" else err
+        per_material = descended.sum(dim=1) / count.clamp(min=1)
+        per_material.sum().backward()
+        return err.detach().sum(dim=1), count
+
+    def gradients(self, idx: torch.Tensor) -> list[dict[str, torch.Tensor]]:
+        """Each material's gradient of the minibatch `idx`, in the weights' layout (no step taken)."""
+        self._backward(self.x[idx], self.log_c[idx], self.log_1mc[idx], self.y[idx], self.mask[idx])
+        out = [{} for _ in range(self.y.shape[1])]
+        for name, p in zip(self.stack.names, self.stack.params):
+            for i, g in enumerate(p.grad):
+                out[i][name] = (g[0] if name.startswith("b") else g).clone()
+            p.grad = None
+        return out
+
     def run(self, perm: torch.Tensor) -> torch.Tensor:
         """One epoch over the samples in `perm`'s order; each active material's mean L1 loss."""
-        stack, recipe = self.stack, self.recipe
         x_e, c_e, d_e = self.x[perm], self.log_c[perm], self.log_1mc[perm]
         y_e, m_e = self.y.index_select(0, perm), self.mask.index_select(0, perm)
         epoch_sum = torch.zeros(self.y.shape[1])
         epoch_count = torch.zeros(self.y.shape[1])
-        for start in range(0, perm.shape[0], recipe.batch_size):
-            sl = slice(start, start + recipe.batch_size)
-            z = stack.forward(x_e[sl])  # (M, B, 3)
-            pred = predict_log(z, c_e[sl, None], d_e[sl, None], recipe.output)
-            m = m_e[sl].T.contiguous()  # (M, B)
-            diff = pred - y_e[sl].transpose(0, 1).contiguous()
-            err = diff.abs().mean(dim=2) * m  # (M, B)
-            count = m.sum(dim=1)
-            descended = diff.square().mean(dim=2) * m if recipe.loss == "l2" else err
-            per_material = descended.sum(dim=1) / count.clamp(min=1)
-            per_material.sum().backward()
-            stack.adam_step(learning_rate(recipe, self.step, self.total))
+        for start in range(0, perm.shape[0], self.recipe.batch_size):
+            sl = slice(start, start + self.recipe.batch_size)
+            err, count = self._backward(x_e[sl], c_e[sl], d_e[sl], y_e[sl], m_e[sl])
+            self.stack.adam_step(learning_rate(self.recipe, self.step, self.total))
             self.step += 1
-            epoch_sum += err.detach().sum(dim=1)
+            epoch_sum += err
+            epoch_count += count
+        return epoch_sum / epoch_count.clamp(min=1)
+
+
+class _FlatStack:
+    """`_Stack` for the hand-written CPU steps: every layer transposed, weights (M, out, in)
+    and biases (M, out, 1), all of them views of one flat buffer (and so their gradients
+    and Adam moments), so that activations are (M, width, B) with the minibatch contiguous
+    and one Adam update covers the whole stack."""
+
+    def __init__(self, inits: Sequence[dict[str, torch.Tensor]], names: list[str]):
+        self.names = names
+        self.shapes = [tuple(inits[0][names[2 * i]].shape[::-1]) for i in range(len(names) // 2)]  # (out, in)
+        n = len(inits)
+        self._allocate(n)
+        for i, (out, _) in enumerate(self.shapes):
+            self.W[i].copy_(torch.stack([w[names[2 * i]].to(torch.float32).T for w in inits]))
+            self.b[i].copy_(torch.stack([w[names[2 * i + 1]].to(torch.float32) for w in inits])[:, :, None])
+        self.t = 0
+
+    def _allocate(self, n: int) -> None:
+        size = n * sum(o * i + o for o, i in self.shapes)
+        self.flat, self.grad = torch.empty(size), torch.zeros(size)
+        self.m, self.v, self.denom = torch.zeros(size), torch.zeros(size), torch.empty(size)
+        self.W, self.b = self._views(self.flat)
+        self.gW, self.gb = self._views(self.grad)
+
+    def _views(self, buffer: torch.Tensor):
+        n = buffer.numel() // sum(o * i + o for o, i in self.shapes)
+        ws, bs, at = [], [], 0
+        for out, inp in self.shapes:
+            ws.append(buffer[at:at + n * out * inp].view(n, out, inp))
+            at += n * out * inp
+            bs.append(buffer[at:at + n * out].view(n, out, 1))
+            at += n * out
+        return ws, bs
+
+    @property
+    def n(self) -> int:
+        return self.W[0].shape[0]
+
+    def adam_step(self, lr: float) -> None:
+        """`adam_update` of the whole stack (the same arithmetic, one buffer)."""
+        self.t += 1
+        b1, b2 = ADAM_BETAS
+        c1, c2 = 1 - b1**self.t, 1 - b2**self.t
+        g = self.grad
+        self.m.mul_(b1).add_(g, alpha=1 - b1)
+        self.v.mul_(b2).addcmul_(g, g, value=1 - b2)
+        torch.div(self.v, c2, out=self.denom).sqrt_().add_(ADAM_EPS)
+        self.flat.addcdiv_(self.m, self.denom, value=-lr / c1)
+
+    def keep(self, rows: torch.Tensor) -> None:
+        old = [self._views(t) for t in (self.flat, self.m, self.v)]
+        self._allocate(len(rows))
+        for buffer, (ws, bs) in zip((self.flat, self.m, self.v), old):
+            new_ws, new_bs = self._views(buffer)
+            for dst, src in zip(new_ws + new_bs, ws + bs):
+                torch.index_select(src, 0, rows, out=dst)
+
+    def weights(self, row: int) -> dict[str, torch.Tensor]:
+        out = {}
+        for i in range(len(self.shapes)):
+            out[self.names[2 * i]] = self.W[i][row].T.clone(memory_format=torch.contiguous_format)
+            out[self.names[2 * i + 1]] = self.b[i][row, :, 0].clone()
+        return out
+
+    def gradient(self, row: int) -> dict[str, torch.Tensor]:
+        out = {}
+        for i in range(len(self.shapes)):
+            out[self.names[2 * i]] = self.gW[i][row].T.clone(memory_format=torch.contiguous_format)
+            out[self.names[2 * i + 1]] = self.gb[i][row, :, 0].clone()
+        return out
+
+
+class _CpuEpochs:
+    """The epochs of a fit on the CPU with a hand-written forward and backward pass (no
+    autograd): batched matrix products into buffers allocated once per stack size, and
+    in-place elementwise steps. Activations are (M, width, B), the minibatch contiguous: the
+    first layer, whose input is shared, is one matrix product for all materials, and the
+    narrow last layer runs fast. Each step gathers its samples' rows with numpy's `take`
+    (torch's row gather of these wide rows is many times slower). Same loss and gradients as
+    `_AutogradEpochs` (tests/unit/test_nbrdf_backward.py)."""
+
+    def __init__(self, stack: _FlatStack, recipe, x, log_c, log_1mc, y, mask, total_steps):
+        self.stack, self.recipe, self.total = stack, recipe, total_steps
+        self.inputs = torch.cat((x, log_c[:, None], log_1mc[:, None]), dim=1).contiguous()  # (S, 8)
+        self._set_targets(y, mask)
+        self.step = 0
+
+    def _set_targets(self, y: torch.Tensor, mask: torch.Tensor) -> None:
+        """Each sample's row of targets (M, 3) then mask (M): one gather per step."""
+        self.n_out = y.shape[2]
+        self.rows = torch.cat((y.reshape(y.shape[0], -1), mask), dim=1).contiguous()
+        self.buffers: dict[int, dict[str, torch.Tensor]] = {}  # minibatch size -> its buffers
+
+    def keep(self, rows: torch.Tensor) -> None:
+        k = self.n_out
+        old = self.rows.shape[1] // (k + 1)
+        y = self.rows[:, :old * k].view(-1, old, k)[:, rows]
+        self._set_targets(y, self.rows[:, old * k:][:, rows])
+
+    def _buffers(self, size: int) -> dict[str, torch.Tensor]:
+        if size not in self.buffers:
+            n, k, e = self.stack.n, self.n_out, torch.empty
+            widths = [o for o, _ in self.stack.shapes]
+            buf = {"a": [e(n, o, size) for o in widths], "g": [e(n, o, size) for o in widths[:-1]]}
+            buf.update(inputs=e(size, self.inputs.shape[1]), rows=e(size, self.rows.shape[1]),
+                       xT=e(self.inputs.shape[1] - 2, size), c=e(size), d=e(size), y=e(n, k, size), m=e(n, 1, size),
+                       s=e(n, k, size), pred=e(n, k, size), diff=e(n, k, size), gz=e(n, k, size), err=e(n, size))
+            self.buffers[size] = buf
+        return self.buffers[size]
+
+    def _backward(self, idx) -> tuple[torch.Tensor, torch.Tensor]:
+        """The gradients of the minibatch `idx` (a numpy index array) into the stack's grad
+        buffer; each material's summed L1 error (over samples, mean over channels) and valid count."""
+        st, recipe, b = self.stack, self.recipe, self._buffers(len(idx))
+        n, k, size = st.n, self.n_out, len(idx)
+        inputs = b["inputs"]
+        np.take(self.inputs.numpy(), idx, axis=0, out=inputs.numpy())
+        np.take(self.rows.numpy(), idx, axis=0, out=b["rows"].numpy())
+        xT = b["xT"].copy_(inputs[:, :-2].T)
+        log_c, log_1mc = b["c"].copy_(inputs[:, -2]), b["d"].copy_(inputs[:, -1])
+        y = b["y"].copy_(b["rows"][:, :n * k].view(size, n, k).permute(1, 2, 0))
+        m = b["m"].copy_(b["rows"][:, n * k:].T[:, None, :])
+        # forward: a[i] is layer i's output, after the ReLU on the hidden layers
+        a = b["a"]
+        last = len(a) - 1
+        rows0 = n * st.shapes[0][0]
+        torch.addmm(st.b[0].view(rows0, 1), st.W[0].view(rows0, -1), xT, out=a[0].view(rows0, size))
+        for i in range(1, len(a)):
+            a[i - 1].relu_()
+            torch.baddbmm(st.b[i], st.W[i], a[i - 1], out=a[i])
+        z = a[last]
+        # the loss, and its gradient with respect to z
+        s, pred, diff, gz = b["s"], b["pred"], b["diff"], b["gz"]
+        if recipe.output == "log":
+            torch.add(z, log_c, out=s)
+            torch.logaddexp(s, log_1mc.expand_as(s), out=pred)  # as predict_log
+        else:
+            torch.clamp(z, max=net.MAX_LOG_VALUE, out=s)
+            torch.expm1(s, out=pred).relu_()
+            pred.mul_(log_c.exp()).log1p_()
+        torch.sub(pred, y, out=diff)
+        count = m.sum(dim=(1, 2))
+        err = torch.sum(torch.abs(diff, out=gz), dim=1, out=b["err"]).mul_(m[:, 0])
+        errs = err.sum(dim=1).div_(k)
+        weight = m / (k * count.clamp(min=1))[:, None, None]  # the per-material mean over valid samples and channels
+        if recipe.loss == "l2":
+            torch.mul(diff, weight, out=gz).mul_(2)
+        else:
+            torch.sign(diff, out=gz).mul_(weight)
+        if recipe.output == "log":
+            gz.mul_(s.sub_(pred).exp_())  # d pred / d z = sigmoid(z + log c − log(1 − c)) = exp(z + log c − pred)
+        else:  # d pred / d z = c e^z / (1 + f c) = exp(z + log c − pred) where relu and the clamp pass it, else 0
+            gz.mul_(s.add_(log_c).sub_(pred).exp_()).mul_((z > 0) & (z <= net.MAX_LOG_VALUE))
+        # backward
+        g = gz
+        for i in range(last, 0, -1):
+            torch.bmm(g, a[i - 1].transpose(1, 2), out=st.gW[i])
+            torch.sum(g, dim=2, keepdim=True, out=st.gb[i])
+            h = b["g"][i - 1]
+            torch.bmm(st.W[i].transpose(1, 2), g, out=h)
+            g = torch.ops.aten.threshold_backward.grad_input(h, a[i - 1], 0.0, grad_input=h)  # ReLU's gradient
+        torch.mm(g.view(rows0, size), xT.T, out=st.gW[0].view(rows0, -1))
+        torch.sum(g, dim=2, keepdim=True, out=st.gb[0])
+        return errs, count
+
+    def gradients(self, idx: torch.Tensor) -> list[dict[str, torch.Tensor]]:
+        """Each material's gradient of the minibatch `idx`, in the weights' layout (no step taken)."""
+        self._backward(idx.numpy())
+        return [self.stack.gradient(i) for i in range(self.stack.n)]
+
+    def run(self, perm: torch.Tensor) -> torch.Tensor:
+        """One epoch over the samples in `perm`'s order; each active material's mean L1 loss."""
+        epoch_sum = torch.zeros(self.stack.n)
+        epoch_count = torch.zeros(self.stack.n)
+        order = perm.numpy()
+        for start in range(0, len(order), self.recipe.batch_size):
+            errs, count = self._backward(order[start:start + self.recipe.batch_size])
+            self.stack.adam_step(learning_rate(self.recipe, self.step, self.total))
+            self.step += 1
+            epoch_sum += errs
             epoch_count += count
         return epoch_sum / epoch_count.clamp(min=1)
 

@@ -1,4 +1,5 @@
-"""NBRDF fitting speed: the batched fitter against one material at a time, same network and loss.
+"""NBRDF fitting speed: the batched fitter against one material at a time, same network and
+loss, and the hand-written CPU engine against the autograd one it replaced.
 
     python -m pytest tests/benchmarks/test_nbrdf_speed.py --benchmark-enable            # CI size
     python -m pytest tests/benchmarks/test_nbrdf_speed.py --benchmark-enable -m slow    # the full comparison
@@ -7,12 +8,17 @@ Each benchmark records `per_material_s` (the call's time over its material count
 final training losses in its extra_info. The CI-size cases use a short recipe on four small
 synthetic materials; the slow ones fit 16 published MERL networks' tables (or synthetic
 materials where the release is absent) with the default recipe, and the published reference
-recipe on alum-bronze for the loss it reaches.
+recipe on alum-bronze for the loss it reaches. The engine comparison alternates the two
+engines over several rounds in one call, so that a change of machine load hits both; it
+records each engine's per-material seconds (median over rounds), their ratio and the load
+average before and after. Speed is reported, never asserted.
 """
 
 from __future__ import annotations
 
+import os
 import statistics
+import time
 
 import pytest
 import torch
@@ -97,3 +103,53 @@ def test_fit_one_material_by_recipe(benchmark, full_targets, recipe_name):
     _record(benchmark, outcomes, 1)
     z = nw.last_layer(outcomes[0].weights, samples.x)
     benchmark.extra_info.update(material=target.name, zero_output_fraction=(z <= 0).float().mean(dim=0).tolist())
+
+
+ENGINE_ROUNDS = 3
+
+
+def _engines_interleaved(tables, recipe, samples, rounds):
+    """Each engine's per-round seconds and last outcomes, the order alternating each round."""
+    inits = _inits(len(tables))
+    seconds, outcomes = {"autograd": [], "manual": []}, {}
+    for r in range(rounds):
+        for engine in ("autograd", "manual") if r % 2 == 0 else ("manual", "autograd"):
+            start = time.perf_counter()
+            outcomes[engine] = fit_batched(tables, inits, recipe=recipe, samples=samples, engine=engine)
+            seconds[engine].append(time.perf_counter() - start)
+    return seconds, outcomes
+
+
+def _record_engines(benchmark, tables, recipe, samples, rounds):
+    load_before = os.getloadavg()
+    seconds, outcomes = benchmark.pedantic(_engines_interleaved, args=(tables, recipe, samples, rounds),
+                                           rounds=1, iterations=1)
+    n = len(tables)
+    per = {e: statistics.median(s) / n for e, s in seconds.items()}
+    benchmark.extra_info.update(
+        materials=n, rounds=rounds, per_material_s_autograd=per["autograd"], per_material_s_manual=per["manual"],
+        speedup=per["autograd"] / per["manual"], round_s=seconds, loadavg_before=load_before,
+        loadavg_after=os.getloadavg(), cpu_threads=torch.get_num_threads(),
+        mean_loss={e: statistics.mean(o.loss for o in out) for e, out in outcomes.items()},
+        epochs={e: [o.epochs for o in out] for e, out in outcomes.items()},
+    )
+
+
+@pytest.fixture(scope="module")
+def small_sixteen(small_tables):
+    return (small_tables * 4)[:FULL_MATERIALS]
+
+
+def test_engines_short_recipe(benchmark, small_sixteen):
+    """The hand-written engine against autograd: 16 stacked materials, a short recipe."""
+    samples = draw_samples(SHORT.n_samples, "rusinkiewicz", seed=0)
+    _record_engines(benchmark, small_sixteen, SHORT, samples, ENGINE_ROUNDS)
+
+
+@pytest.mark.slow
+def test_engines_default_recipe(benchmark, full_targets):
+    """The hand-written engine against autograd: 16 materials, the default recipe."""
+    recipe = Recipe()
+    samples = draw_samples(recipe.n_samples, "rusinkiewicz", seed=0)
+    _record_engines(benchmark, [t.table for t in full_targets], recipe, samples, ENGINE_ROUNDS)
+    benchmark.extra_info["materials_fitted"] = [t.name for t in full_targets]
