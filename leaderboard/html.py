@@ -350,11 +350,26 @@ def render_view(report: view.Report, convergence_svgs: dict[str, str] | None = N
                 body += generation_render.html_section(s, sid, results_dir)
             else:
                 body += table_section(s, sid, results_dir)
+        body += machine_section(report.machines)
     body += extra or []
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
             f"<title>brdfbench leaderboard</title><style>{_asset('report.css')}</style></head>"
             f"<body>{''.join(body)}<script>{_asset('report.js')}</script></body></html>\n")
+
+
+def machine_section(machines: list) -> list[str]:
+    """The machine-speed table (see `view.MachineSpeed`), or nothing for a store without one."""
+    if not machines:
+        return []
+    head = "".join(_th(t, cls="label") for t in ("host", "CPU", "device")) + "".join(
+        _th(t) for t in ("threads", "runs", "GFLOP/s ↑ (median)", "slowest run", "fastest run"))
+    rows = "".join(f'<tr><td class="label">{_e(m.host)}</td><td class="label">{_e(m.cpu_model)}</td>'
+                   f'<td class="label">{_e(m.device)}</td><td>{m.threads}</td><td>{m.runs}</td>'
+                   f'<td>{_number(m.median)}</td><td>{_number(m.low)}</td><td>{_number(m.high)}</td></tr>'
+                   for m in machines)
+    return ['<h2 id="machine-speed">Machine speed</h2>', f'<p class="note">{_e(view.MACHINE_NOTE)}</p>',
+            f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table></div>']
 
 
 def published_section(report: view.Report) -> list[str]:

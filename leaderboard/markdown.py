@@ -185,7 +185,19 @@ def render_view(report: view.Report, plots: Collection[str] = ()) -> str:
             lines += generation_render.markdown(s)
         else:
             lines += table_section(s)
+    lines += machine_section(report.machines)
     return "\n".join(lines)
+
+
+def machine_section(machines: list) -> list[str]:
+    """The machine-speed table (see `view.MachineSpeed`), or nothing for a store without one."""
+    if not machines:
+        return []
+    lines = ["## Machine speed", "", view.MACHINE_NOTE, ""]
+    lines += _table(["host", "CPU", "device", "threads", "runs", "GFLOP/s ↑ (median)", "slowest run", "fastest run"],
+                    [[m.host, m.cpu_model, m.device, str(m.threads), str(m.runs), fmt(m.median), fmt(m.low), fmt(m.high)]
+                     for m in machines])
+    return lines + [""]
 
 
 def render(df: pd.DataFrame, source: str, plots: Collection[str] = ()) -> str:

@@ -22,6 +22,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from brdfbench.pipeline import calibration
+
 from . import tables
 
 BOOTSTRAP_RESAMPLES = 2000
@@ -228,6 +230,46 @@ class Report:
     git_shas: list[str]
     sections: list  # TableSection | ConvergenceSection | generation_view.GenerationSection
     empty: bool
+    machines: list = field(default_factory=list)  # MachineSpeed of every host and thread count
+
+
+@dataclass(frozen=True)
+class MachineSpeed:
+    """The calibration product's speed (GFLOP/s) on one host and thread count: the median
+    over its runs (a run: one job's cells) and the slowest and fastest run."""
+
+    host: str
+    cpu_model: str
+    threads: int
+    device: str
+    runs: int
+    median: float
+    low: float
+    high: float
+
+
+#: What the report says of the machine-speed table.
+MACHINE_NOTE = (f"A fixed {calibration.SIZE}×{calibration.SIZE} fp32 matrix product, timed on each task's threads "
+                "just before it ran (median of its repeats). Where the runs of one host and thread count differ "
+                "widely, its cost figures differ for the machine's sake as much as the models': compare timings "
+                "of runs whose speeds agree.")
+
+
+def machine_speeds(df: pd.DataFrame) -> list[MachineSpeed]:
+    """The machine-speed table of the store's calibration rows (none in older stores)."""
+    rows = df[(df.metric == calibration.METRIC) & (df.status == "ok")]
+    if rows.empty:
+        return []
+    for col, default in (("host", ""), ("cpu_model", ""), ("threads", 0), ("device", "cpu"), ("run_id", "")):
+        if col not in rows.columns:
+            rows = rows.assign(**{col: default})
+    per_run = rows.groupby(["host", "cpu_model", "threads", "device", "run_id"])["value"].median().reset_index()
+    out = []
+    for (host, cpu, threads, device), g in per_run.groupby(["host", "cpu_model", "threads", "device"]):
+        v = g["value"].to_numpy(dtype=float)
+        out.append(MachineSpeed(str(host), str(cpu), int(threads), str(device), len(v), float(np.median(v)),
+                                float(v.min()), float(v.max())))
+    return out
 
 
 #: The suffix of the first look's brief-recipe configurations (conf/representation/*_brief.yaml).
@@ -439,6 +481,8 @@ def build(df: pd.DataFrame, source: str) -> Report:
         return Report(source, generated, [], [], [], True)
     from .generation_view import generation_section
 
+    machines = machine_speeds(df)
+    df = df[df.metric != calibration.METRIC]  # the machine's figure, not a model's
     sections: list = []
     widths = lobe_widths(df)
     for (name, fingerprint, scene, harness, sampler), group in tables.sections(df):
@@ -449,4 +493,4 @@ def build(df: pd.DataFrame, source: str) -> Report:
         else:
             sections.append(table_section((name, fingerprint, scene, harness), group, widths.get(str(fingerprint))))
     return Report(source, generated, sorted(set(map(str, df.package_version))),
-                  sorted({str(s)[:10] for s in df.git_sha}), sections, False)
+                  sorted({str(s)[:10] for s in df.git_sha}), sections, False, machines)

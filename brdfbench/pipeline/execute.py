@@ -28,6 +28,7 @@ from ..errors import BrdfbenchError, RenderError
 from ..harness import HarnessContext, Measurement
 from ..harness.cost import model_size
 from ..protocol import FIT_LOSS_KEY
+from . import calibration
 from .config import RunConfig
 from .memory import peak_rss, reset_peak
 from .plan import Checked, Task, check, config_hash, hashed_config
@@ -95,10 +96,11 @@ def _limit(job: RunConfig, n: int = 1) -> float | None:
 
 def execute(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency: Callable[[], int] = lambda: 1) -> None:
     """Run `task`, emitting one cell message per material or set (see the module docstring)."""
+    speed = calibration.measure()  # the machine's speed on this task's threads, stored with each cell
     if state.checked.harness_cls.scope == "set":
-        return _execute_sets(job, task, state, emit, concurrency)
+        return _execute_sets(job, task, state, emit, concurrency, speed)
     dataset, spec = state.checked.dataset, state.checked.spec
-    trained, extra = None, []
+    trained, extra = None, [speed]
     if task.train is not None:
         what = f"training {job.label} on {len(task.train)} materials"
         emit(("phase", _limit(job), what, what))
@@ -109,7 +111,7 @@ def execute(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency
             t0 = time.perf_counter()
             trained.train((dataset.load(n) for n in task.train), seed=job.seed)
             extra = [Measurement("train_time", time.perf_counter() - t0, "s", False),
-                     *_memory("peak_rss_train")]
+                     *_memory("peak_rss_train"), speed]
         except Exception as exc:  # a failed training fails every cell of its fold, and the sweep goes on
             message = "training failed: " + _fault(exc, state.device)
             log.warning("%s: %s", job.label, message)
@@ -177,7 +179,8 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
             emit(("cell", material.name, material.category, measurements, "ok", "", max(busy, concurrency())))
 
 
-def _execute_sets(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency: Callable[[], int]) -> None:
+def _execute_sets(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency: Callable[[], int],
+                  speed: Measurement) -> None:
     """A set-scope task: train the job's plugin once on `task.train`, then measure each set."""
     harness = state.harness
     try:
@@ -193,7 +196,7 @@ def _execute_sets(job: RunConfig, task: Task, state: JobState, emit: Emit, concu
         model = harness.train(model, task.train, job.seed,
                               progress=f"training {job.label}" if progress_mode(job) == "bar" else False)
         devices.synchronize(state.device)
-        extra = [Measurement("train_time", time.perf_counter() - t0, "s", False), *_memory("peak_rss_train")]
+        extra = [Measurement("train_time", time.perf_counter() - t0, "s", False), *_memory("peak_rss_train"), speed]
         if job.save_models:
             modelio.save_generator(model, job.plugin, job.results_dir / "models" / state.checked.dataset.fingerprint
                                    / job.label / "generator.safetensors")

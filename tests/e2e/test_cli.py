@@ -27,6 +27,10 @@ def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path, cli_
         assert f"`{name}`" in board, name
     assert "fit time (s)" in board and "evals/s" in board and "bytes" in board
     assert "the first look's brief training recipes" in board and "profile=full" in board
+    assert "## Machine speed" in board  # the calibration product, stored with every cell
+    df = ResultsStore(tmp_path / "res" / "brdfbench.sqlite").frame()
+    cells = df.groupby(["config_hash", "material"])["metric"].apply(set)
+    assert all("calibration_gflops" in metrics for metrics in cells)
     assert out.stdout.count(": 3 done") == len(FIRST_LOOK)
     page = (tmp_path / "res" / "leaderboard.html").read_text(encoding="utf-8")
     assert "Accuracy against cost" in page and "<svg" in page and "Lobes: in-plane slices" in page

@@ -188,8 +188,12 @@ def test_parallel_jobs_record_their_threads_and_neighbours(tmp_path, cli_process
     assert again.returncode == 0, again.stderr
     one = ResultsStore(seq / "brdfbench.sqlite").frame()
     assert set(one.launcher) == {"basic"} and set(one.concurrent_jobs) == {1}
-    keep = ~df.metric.isin(["fit_time", "evals_per_s", "peak_rss_fit", "peak_rss_eval"])
+    machine = ["fit_time", "evals_per_s", "peak_rss_fit", "peak_rss_eval", "calibration_gflops"]
     key = ["representation", "material", "metric"]
-    a = df[keep].set_index(key)["value"].sort_index()
-    b = one[~one.metric.isin(["fit_time", "evals_per_s", "peak_rss_fit", "peak_rss_eval"])].set_index(key)["value"].sort_index()
-    assert a.equals(b)
+    a = df[~df.metric.isin(machine)].set_index(key)["value"].sort_index()
+    b = one[~one.metric.isin(machine)].set_index(key)["value"].sort_index()
+    assert a.index.equals(b.index)
+    # one thread against two: the same figures to fp64 rounding (torch splits its sums over the
+    # grid's cells by thread; measured: at most 3e-16 relative), far below any printed digit
+    rel = ((a - b).abs() / b.abs().clip(lower=1e-30))
+    assert (rel < 1e-12).all(), rel[rel >= 1e-12]

@@ -93,7 +93,9 @@ def test_resume_equals_one_shot(base_params, tmp_path, one_shot, monkeypatch):
     monkeypatch.setattr(N.NeumerlWeights, "_fit", lambda self, names, init: _record(refits, self, names, init))
     resumed = make(base_params, tmp_path).weights(ds.materials)
     assert set(refits) == set(ds.materials) - set(written)
-    np.testing.assert_array_equal(resumed.vectors, expected.vectors)
+    # the resumed batch is smaller: the fitter's shared first-layer product over the stack rounds
+    # differently with its size (to fp32 rounding, as tests/integration/test_nbrdf.py's batching checks)
+    np.testing.assert_allclose(resumed.vectors, expected.vectors, rtol=1e-4, atol=1e-5)
 
 
 _REAL_FIT = N.NeumerlWeights._fit

@@ -37,7 +37,9 @@ def grid():
 def test_small_dataset_metadata(small):
     cache, ds, mats = small
     assert isinstance(ds, Dataset) and ds.name == "synthetic" and len(ds) == 6
-    assert ds.fingerprint == f"synthetic-{S.GENERATOR_VERSION}-seed0"
+    # a set other than the default 24 is other data: its size is in the fingerprint
+    assert ds.fingerprint == f"synthetic-{S.GENERATOR_VERSION}-seed0-n6"
+    assert S.synthetic_dataset("default", seed=0, cache_dir=str(cache)).fingerprint == f"synthetic-{S.GENERATOR_VERSION}-seed0"
     assert set(ds.categories.values()) == set(S.CATEGORIES)
     assert len(set(ds.materials)) == 6
     for m in mats:
@@ -217,7 +219,7 @@ def test_tampered_cache_file_is_regenerated_with_a_warning(tmp_path, caplog):
         m = again.load(name)
     assert np.array_equal(m.table.raw, original)
     assert any(str(path) in r.getMessage() and "regenerating" in r.getMessage() for r in caplog.records)
-    assert again.fingerprint == ds.fingerprint == f"synthetic-{S.GENERATOR_VERSION}-seed0"
+    assert again.fingerprint == ds.fingerprint == f"synthetic-{S.GENERATOR_VERSION}-seed0-n{len(ds)}"
 
 
 def test_untampered_cache_is_reused_and_its_digest_cached(tmp_path, monkeypatch):
@@ -314,7 +316,7 @@ def test_entry_point_spec_builds_the_dataset(tmp_path):
     from brdfbench.data.specs import SYNTHETIC
 
     ds = SYNTHETIC.load()(size="small", seed=3, cache_dir=str(tmp_path))
-    assert ds.materials == S.material_names("small", 3) and ds.fingerprint.endswith("seed3")
+    assert ds.materials == S.material_names("small", 3) and ds.fingerprint.endswith("seed3-n6")
 
 
 def _ggx_fit_residual(values: np.ndarray, cells: np.ndarray) -> float:
