@@ -176,15 +176,21 @@ def test_parallel_jobs_record_their_threads_and_neighbours(tmp_path, cli_process
     """workers=2 threads=1: two jobs at once in joblib's pool, without a launcher flag; each
     cell records one thread and, while both ran, two busy workers; the figures are the
     sequential run's."""
+    import os
+
     res, seq = tmp_path / "res", tmp_path / "seq"
     args = ["-m", "representation=lambert,merl", *SMALL, "limit=2"]
-    out = cli_process(*args, "workers=2", "threads=1", f"results_dir={res}", cwd=tmp_path)
+    # a private temporary folder: its busy-worker markers count this test's workers only, not
+    # those of tests running beside it
+    (tmp_path / "tmp").mkdir()
+    env = {**os.environ, "TMPDIR": str(tmp_path / "tmp")}
+    out = cli_process(*args, "workers=2", "threads=1", f"results_dir={res}", cwd=tmp_path, env=env)
     assert out.returncode == 0, out.stderr
     assert "2 jobs, 2 at a time on 1 threads each" in out.stdout
     df = ResultsStore(res / "brdfbench.sqlite").frame()
     assert set(df.threads) == {1} and set(df.launcher) == {"parallel:2"}
     assert df.concurrent_jobs.max() == 2
-    again = cli_process(*args, "workers=1", f"results_dir={seq}", cwd=tmp_path)
+    again = cli_process(*args, "workers=1", f"results_dir={seq}", cwd=tmp_path, env=env)
     assert again.returncode == 0, again.stderr
     one = ResultsStore(seq / "brdfbench.sqlite").frame()
     assert set(one.launcher) == {"basic"} and set(one.concurrent_jobs) == {1}
