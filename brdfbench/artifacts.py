@@ -47,3 +47,34 @@ def lookup(results_dir: Path, config_hash: str, material: str) -> dict[str, dict
     except (OSError, ValueError):
         return {}
     return value if isinstance(value, dict) else {}
+
+
+def saved_model_path(results_dir: Path, fingerprint: str, label: str, material: str) -> Path:
+    """Where `save_models=true` keeps a cell's fitted model."""
+    return Path(results_dir) / "models" / fingerprint / label / f"{material}.safetensors"
+
+
+def discard(results_dir: Path, config_hash: str, material: str) -> None:
+    """Remove a cell's artifacts (its index and the files it lists inside the results folder,
+    but the shared reference image), for a cell that could not be stored: nothing is left that the store does not know."""
+    root = Path(results_dir).resolve()
+    index = index_path(results_dir, config_hash, material)
+    for kind, entry in lookup(results_dir, config_hash, material).items():
+        if kind == "reference":  # the target's image, shared with other configurations
+            continue
+        path = Path(entry.get("path", "")) if isinstance(entry, dict) else None
+        if not path or not str(path):
+            continue
+        path = (root / path).resolve()
+        if root not in path.parents:
+            continue
+        for each in (path, *(path.with_name(entry[k]) for k in ("png",) if isinstance(entry.get(k), str))):
+            try:
+                each.unlink(missing_ok=True)
+            except OSError:
+                pass
+    try:
+        index.unlink(missing_ok=True)
+        index.parent.rmdir()  # only when empty
+    except OSError:
+        pass

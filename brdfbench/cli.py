@@ -190,6 +190,12 @@ def _dispatch(argv: list[str]) -> int:
             return args.func(args)
         except BrdfbenchError as exc:
             return _fail(str(exc))
+        except OSError as exc:  # a folder that cannot be read or written: one line, not a traceback
+            if isinstance(exc, BrokenPipeError):
+                raise
+            from .errors import os_error
+
+            return _fail(os_error(exc, f"brdfbench {args.command}"))
     if "--version" in argv:
         from . import __version__
 

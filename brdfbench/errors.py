@@ -23,3 +23,11 @@ class ConfigError(BrdfbenchError):
 
 class RenderError(BrdfbenchError):
     """A render produced non-finite values, or a scene/environment map is unusable."""
+
+
+def os_error(exc: OSError, what: str = "") -> str:
+    """One line for an OSError: the file it names, what was being done, and the system's words."""
+    where = exc.filename if exc.filename is not None else ""
+    words = exc.strerror or str(exc)
+    head = f"{where}: " if where else ""
+    return f"{head}{words}" + (f" ({what})" if what else "")

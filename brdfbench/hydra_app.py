@@ -16,7 +16,7 @@ from typing import Any
 import hydra
 from omegaconf import DictConfig
 
-from .errors import BrdfbenchError
+from .errors import BrdfbenchError, os_error
 from .hydra_callbacks import finish
 from .hydra_choices import check_group_choices
 from .hydra_config import JOB_SUMMARY, to_run_config, write_summary
@@ -45,7 +45,13 @@ def _app(cfg: DictConfig) -> None:
               f"{counts['failed']} failed", flush=True)
     except BrdfbenchError as exc:
         print(f"brdfbench: error: {exc}", file=sys.stderr, flush=True)
-        summary["error"] = str(exc)
+        summary.update(error=str(exc), printed=True)
+        if not multirun:
+            raise SystemExit(2) from None
+    except OSError as exc:  # the results folder could not be written (read-only, a full disk)
+        message = os_error(exc, "writing the results")
+        print(f"brdfbench: error: {message}", file=sys.stderr, flush=True)
+        summary.update(error=message, printed=True)
         if not multirun:
             raise SystemExit(2) from None
     finally:

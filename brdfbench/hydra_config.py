@@ -15,6 +15,9 @@ from .errors import ConfigError
 from .runner import RunConfig, harness_config
 
 JOB_SUMMARY = "brdfbench_job.json"
+#: Summaries of the jobs run in this process, so the end of the sweep has them even where a
+#: full disk kept their files from being written.
+IN_PROCESS: list[dict[str, Any]] = []
 #: Top-level keys of config.yaml besides the groups; anything else is a typo.
 TOP_LEVEL = {"representation", "generator", "dataset", "harness", "scene", "seed", "materials", "limit", "results_dir",
              "save_models",
@@ -82,6 +85,8 @@ def to_run_config(cfg: DictConfig, job: str = "") -> RunConfig:
     materials = _value(cfg, "materials")
     if materials is not None and not isinstance(materials, (list, tuple)):
         raise ConfigError(f"materials={materials!r} must be a list of material names (e.g. materials=[a,b])")
+    if materials is not None and len(materials) == 0:
+        raise ConfigError("materials=[]: an empty selection; name at least one material, or leave materials out to take them all")
     if gen:  # a generator job: it measures the generator, the representation group is not read
         model = dict(representation="", representation_params={}, generator=gen["name"],
                      generator_params=gen.get("params") or {},
@@ -125,8 +130,15 @@ def _launcher(choices: dict) -> str:
 
 
 def write_summary(folder: Path, summary: dict[str, Any]) -> None:
+    """Keep the job's summary (in memory, and in its Hydra folder for other launchers); a
+    folder that cannot be written (a full disk) becomes the job's error, not a traceback."""
     from .atomic import replacing
+    from .errors import os_error
 
-    folder.mkdir(parents=True, exist_ok=True)
-    with replacing(folder / JOB_SUMMARY) as tmp:
-        tmp.write_text(json.dumps(summary), encoding="utf-8")
+    IN_PROCESS.append(summary)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with replacing(folder / JOB_SUMMARY) as tmp:
+            tmp.write_text(json.dumps(summary), encoding="utf-8")
+    except OSError as exc:
+        summary.setdefault("error", f"the job's summary could not be written: {os_error(exc)}")

@@ -12,6 +12,8 @@ from __future__ import annotations
 import logging
 import uuid
 
+from . import artifacts
+
 from .pipeline.config import RunConfig, harness_config
 from .pipeline.environment import ActiveMarker, environment
 from .pipeline.execute import execute, job_state
@@ -36,7 +38,13 @@ def run(cfg: RunConfig) -> dict[str, int]:
 
     def on_cell(message: tuple) -> None:
         material, category, measurements, status, text, concurrent = message
-        recorder.cell(material, category, measurements, status, text, concurrent)
+        try:
+            recorder.cell(material, category, measurements, status, text, concurrent)
+        except Exception:  # not stored (a full disk): leave no file of a cell the store does not hold
+            artifacts.discard(cfg.results_dir, plan.config_hash, material)
+            if cfg.save_models and not cfg.generator:
+                artifacts.saved_model_path(cfg.results_dir, plan.dataset.fingerprint, cfg.label, material).unlink(missing_ok=True)
+            raise
         counts["done" if status == "ok" else "failed"] += 1
         if status != "ok":
             log.warning("%s on %s failed: %s", cfg.label, material, text)

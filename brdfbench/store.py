@@ -225,7 +225,11 @@ class ResultsStore(Store):
                " FROM results r LEFT JOIN configs c ON c.config_hash = r.config_hash"
                " LEFT JOIN environments e ON e.env_id = r.env_id" + (f" WHERE {clause}" if clause else ""))
         with self._connection() as con:
-            df = pd.read_sql_query(sql, con, params=tuple(where.values()))
+            try:
+                df = pd.read_sql_query(sql, con, params=tuple(where.values()))
+            except pd.errors.DatabaseError as exc:  # pandas wraps SQLite's own error
+                cause = exc.__cause__ if isinstance(exc.__cause__, sqlite3.DatabaseError) else sqlite3.DatabaseError(str(exc).rsplit(": ", 1)[-1])
+                raise _store_error(self.path, cause) from None
         _check_values(df, self.path)
         df["value"] = pd.to_numeric(df["value"]).astype(float)
         df["higher_is_better"] = df["higher_is_better"].astype(bool)

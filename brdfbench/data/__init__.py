@@ -80,6 +80,8 @@ class Dataset:
     def subset(self, names: list[str] | None = None, limit: int | None = None) -> "Dataset":
         """The same dataset restricted to `names` (in the given order) and/or the first `limit`."""
         chosen = list(self.materials)
+        if names is not None and not names:
+            raise DataError(f"materials=[]: an empty selection of dataset {self.name!r}; leave materials out to take every material")
         if names:
             unknown = [n for n in names if n not in self.materials]
             if unknown:

@@ -13,6 +13,7 @@ Nothing here writes to the store.
 
 from __future__ import annotations
 
+import errno
 import logging
 import math
 import time
@@ -23,8 +24,8 @@ from typing import Any, Callable
 import torch
 
 from .. import device as devices
-from .. import modelio
-from ..errors import BrdfbenchError, RenderError
+from .. import artifacts, modelio
+from ..errors import BrdfbenchError, ConfigError, DataError, RenderError, os_error
 from ..harness import HarnessContext, Measurement
 from ..harness.cost import model_size
 from ..protocol import FIT_LOSS_KEY
@@ -74,6 +75,10 @@ def job_state(job: RunConfig) -> JobState:
     return JobState(checked, checked.harness_cls(job.harness, context), device=devices.for_plugin(asked, checked.cls))
 
 
+#: errno values of a results folder that cannot be written: the job stops, naming the file
+_DISK_ERRORS = {errno.ENOSPC, errno.EROFS, errno.EDQUOT}
+
+
 def _fault(exc: Exception, device: torch.device = devices.CPU) -> str:
     """The failure message of a plugin's exception; bad data (any other BrdfbenchError) is
     re-raised, so that it stops the job naming the file. A device out of memory names the
@@ -85,8 +90,12 @@ def _fault(exc: Exception, device: torch.device = devices.CPU) -> str:
         return message
     if isinstance(exc, (RenderError, NonFinite)):
         return str(exc)
+    if isinstance(exc, ConfigError):  # the plugin cannot run so (e.g. too few materials): its cells fail, the sweep goes on
+        return str(exc)
     if isinstance(exc, BrdfbenchError):
         raise exc
+    if isinstance(exc, OSError) and exc.errno in _DISK_ERRORS:  # the results folder, not the plugin, failed
+        raise DataError(os_error(exc, "writing the results")) from None
     return "".join(traceback.format_exception_only(type(exc), exc)).strip()
 
 
@@ -170,7 +179,7 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
             _check_finite(measurements, material.name)
             if job.save_models:
                 modelio.save(model, job.representation,
-                             job.results_dir / "models" / dataset.fingerprint / job.label / f"{material.name}.safetensors")
+                             artifacts.saved_model_path(job.results_dir, dataset.fingerprint, job.label, material.name))
         except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
             message = _fault(exc, state.device)
             log.warning("%s failed on %s: %s", job.label, material.name, message)

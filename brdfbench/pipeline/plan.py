@@ -132,7 +132,7 @@ def check(job: RunConfig) -> Checked:
     # a dataset that computes (NeuMERL's fits, AugMERL's PCA) takes the job's device: run
     # control, never part of its fingerprint
     placed = {"device": job.device} if "device" in inspect.signature(ds_factory).parameters else {}
-    dataset = ds_factory(**job.dataset_params, **placed).subset(list(job.materials) if job.materials else None, job.limit)
+    dataset = ds_factory(**job.dataset_params, **placed).subset(None if job.materials is None else list(job.materials), job.limit)
     harness_cls.check_plugin(job.harness, spec, dataset)
     return Checked(spec, cls, probe, harness_cls, scene, metric_specs, dataset)
 
