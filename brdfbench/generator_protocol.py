@@ -227,6 +227,10 @@ class Generator(Placed, ABC):
     def sample_nbytes(self, n: int) -> int:
         """Estimated peak bytes that sampling n materials allocates (checked before sampling)."""
 
+    def preflight(self) -> None:
+        """Check what the parameters name outside this process (a file to start from) before
+        any work, so a sweep's validation finds it; raise a BrdfbenchError naming the key."""
+
     # -- persistence ---------------------------------------------------------------
     @abstractmethod
     def state_dict(self) -> dict[str, torch.Tensor]:

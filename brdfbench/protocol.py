@@ -105,6 +105,10 @@ class Representation(Placed, ABC):
         """Learn the shared state from training materials (consumed one at a time); returns self."""
         raise NotImplementedError(f"{type(self).__name__} does not train on a split")
 
+    def preflight(self) -> None:
+        """Check what the parameters name outside this process (a file to start from) before
+        any work, so a sweep's validation finds it; raise a BrdfbenchError naming the key."""
+
     # -- persistence -------------------------------------------------------------
     @abstractmethod
     def state_dict(self) -> dict[str, torch.Tensor]:

@@ -302,6 +302,11 @@ def _choice(key: str, value, options: Sequence) -> Any:
     return value
 
 
+#: The largest classifier-free guidance weight taken: far beyond the 1–10 used in practice,
+#: a weight this large only amplifies the denoiser's noise.
+MAX_GUIDANCE = 100.0
+
+
 def check_params(p: dict[str, Any]) -> dict[str, Any]:
     """The constructor params validated and normalised (JSON-able); ConfigError names the key."""
     out = dict(p)
@@ -318,8 +323,11 @@ def check_params(p: dict[str, Any]) -> dict[str, Any]:
     out["weight_decay"] = _real("weight_decay", p["weight_decay"], 0.0, math.inf, hi_open=True)
     out["ema"] = _real("ema", p["ema"], 0.0, 1.0, hi_open=True)
     out["eta"] = _real("eta", p["eta"], 0.0, 1.0)
-    out["guidance"] = _real("guidance", p["guidance"], -math.inf, math.inf, lo_open=True, hi_open=True)
+    out["guidance"] = _real("guidance", p["guidance"], 0.0, MAX_GUIDANCE)
     out["condition_on"] = _choice("condition_on", p["condition_on"], CONDITIONS)
+    if out["condition_on"] is None and out["guidance"] != 1.0:
+        raise ConfigError(f"{NAME}: guidance={out['guidance']:g} has no effect without a condition: set "
+                          "condition_on='category', or leave guidance at 1")
     out["p_uncond"] = _real("p_uncond", p["p_uncond"], 0.0, 1.0, hi_open=True)
     if out["condition_on"] and out["p_uncond"] == 0.0 and out["guidance"] != 1.0:
         raise ConfigError(f"{NAME}: guidance={out['guidance']:g} needs p_uncond > 0: with p_uncond=0 the "
@@ -484,7 +492,7 @@ class HyperDiffusion(Generator):
 
     def _check_weight_set(self, ws: WeightSet) -> None:
         if len(ws.names) < 2:
-            raise DataError(f"{NAME}: needs at least 2 training materials, got {len(ws.names)}")
+            raise ConfigError(f"{NAME}: needs at least 2 training materials, got {len(ws.names)}")
         wanted = self.params["hidden"]
         if wanted is not None and tuple(wanted) != tuple(ws.hidden):
             raise ConfigError(

@@ -27,7 +27,7 @@ from typing import Any, ClassVar, Sequence
 import torch
 
 from brdfbench import reused
-from brdfbench.errors import ConfigError, ModelFileError
+from brdfbench.errors import BrdfbenchError, ConfigError, ModelFileError
 from brdfbench.nbrdf import network as net
 from brdfbench.nbrdf.formats import read_network
 from brdfbench.nbrdf.network import Network
@@ -137,6 +137,14 @@ class NeuralBRDF(Representation):
         if self.weights is None:
             return None
         return Network(weights=self.weights, features=self.features, raw_units=self.raw_units)
+
+    def preflight(self) -> None:
+        """A network file named by init= is read now, so a missing or wrong one fails at validation."""
+        if self.init not in ("random", "shared"):
+            try:
+                self._anchor = self._read_init(Path(self.init))
+            except BrdfbenchError as exc:
+                raise ConfigError(f"{self.plugin_name}: init: {exc}") from None
 
     def _read_init(self, path: Path) -> dict[str, torch.Tensor]:
         network = read_network(path, hidden=self.hidden, features=self.features, raw_units=self.raw_units)

@@ -122,6 +122,7 @@ def check(job: RunConfig) -> Checked:
     cls = spec.load()
     check_params(cls, job.plugin_params, job.params_key)
     probe = spec.create(**job.plugin_params)  # a bad parameter value fails now, naming it
+    probe.preflight()  # and a file it names (init=…) that is missing or unreadable
     scene_factory = registry.get("scenes", job.scene).load()
     check_params(scene_factory, job.scene_params, "scene.params")
     scene = scene_factory(**job.scene_params)

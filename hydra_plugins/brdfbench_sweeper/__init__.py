@@ -44,7 +44,10 @@ def job_overrides(params: Mapping[str, Any] | None, sections: Mapping[str, Mappi
                   arguments: Sequence[str], parser: OverridesParser | None = None) -> list[list[str]]:
     """Every job's overrides: the main sweep, then each section's (see the module docstring)."""
     parser = parser or OverridesParser.create()
-    main = [f"{k}={_text(v)}" for k, v in (params or {}).items()]
+    keys = {_key(a) for a in arguments}
+    # a generator job measures the generator: the profile's sweep over representations would
+    # only repeat it once per representation
+    main = [f"{k}={_text(v)}" for k, v in (params or {}).items() if not ("generator" in keys and k == "representation")]
     groups = [main]
     if not any(_key(a) in SELECTORS for a in arguments):
         for section in (sections or {}).values():

@@ -133,11 +133,15 @@ def test_trained_representation_is_cross_validated_over_every_material(tmp_path,
     assert "train time (s)" in board and "shared bytes" in board and "bytes/material" in board
 
 
-def test_k_too_large_stops_the_run_with_a_clear_error(tmp_path, synthetic_cache):
+def test_k_too_large_fails_every_cell_naming_it(tmp_path, synthetic_cache):
+    """A plugin that cannot run so (more components than the training split gives) fails its
+    cells with its own words; the run goes on to the end, so a sweep's other jobs still run."""
     cfg = _cfg(tmp_path, synthetic_cache, "pca", harness=harness_config(n_random=1024, throughput_batch=256, folds=2))
     cfg = RunConfig(**{**cfg.__dict__, "representation_params": {"k": 300}})
-    with pytest.raises(ConfigError, match="k=300 is larger than"):
-        run(cfg)
+    counts = run(cfg)
+    assert counts["done"] == 0 and counts["failed"] == 6  # the small set
+    df = ResultsStore(tmp_path / "brdfbench.sqlite").frame()
+    assert (df.status == "failed").all() and df.message.str.contains("k=300 is larger than").all()
 
 
 def test_a_models_own_fit_loss_is_recorded(tmp_path, synthetic_cache):
