@@ -23,7 +23,7 @@ import torch
 
 from . import __version__, registry
 from .atomic import replacing
-from .errors import ModelFileError, PluginError
+from .errors import BrdfbenchError, ModelFileError, PluginError
 from .protocol import Representation
 
 _FORMAT = "brdfbench.model/1"
@@ -189,7 +189,7 @@ def _rebuild(path: Path, name: str, cls: type, params: dict, tensors: dict, extr
     held = _Tensors(tensors)
     try:
         return cls.from_state(params, held, extra)
-    except ModelFileError as exc:
+    except BrdfbenchError as exc:  # the file's values refused (a ConfigError from the constructor too): name the file
         message = str(exc)
         raise ModelFileError(message if str(path) in message else f"{path}: {message}") from None
     except (KeyError, TypeError, ValueError, IndexError, RuntimeError) as exc:
@@ -206,9 +206,23 @@ def _rebuild(path: Path, name: str, cls: type, params: dict, tensors: dict, extr
         ) from None
 
 
+#: What `load_torch_weights` takes, for its refusals.
+TORCH_ACCEPTED = "a torch .pt file of tensors only (a state_dict saved with torch.save), .npy, .h5 or .safetensors"
+
+
 def load_torch_weights(path: str | os.PathLike) -> dict[str, torch.Tensor]:
-    """Load a torch state dict with weights_only=True (no arbitrary code), for importers."""
+    """Load a torch state dict with weights_only=True (no arbitrary code), for importers.
+
+    A refusal is one line of our own: torch's advice to retry with weights_only=False is
+    the wrong advice beside a file that may carry code."""
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise ModelFileError(f"{path}: no such file") from None
     except Exception as exc:
-        raise ModelFileError(f"{path}: refused by torch.load(weights_only=True): {exc}") from None
+        text = str(exc)
+        if "GLOBAL" in text or "Unsupported global" in text:
+            raise ModelFileError(f"{path}: holds pickled Python objects besides tensors and was not loaded "
+                                 f"(nothing in it ran); accepted: {TORCH_ACCEPTED}") from None
+        raise ModelFileError(f"{path}: not a torch file of tensors (its contents could not be read as one); "
+                             f"accepted: {TORCH_ACCEPTED}") from None

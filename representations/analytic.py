@@ -17,8 +17,9 @@ from typing import Any, ClassVar
 import torch
 
 from brdfbench import reused
-from brdfbench.errors import ConfigError
+from brdfbench.errors import ConfigError, ModelFileError
 from brdfbench.protocol import Material, Representation
+from brdfbench.state_checks import expect_tensor
 
 from .analytic_terms import (ALPHA_MIN, Geometry, blinn_phong_lobe, geometry, ggx_ndf, ior_to_f0, schlick_fresnel,
                              schlick_g_over_4cc, smith_g2_over_4cc)
@@ -150,8 +151,11 @@ class AnalyticBRDF(Representation):
     @classmethod
     def from_state(cls, params, tensors, metadata):
         model = cls(**params)
-        for c in cls.COEFFS:
-            model.coeffs[c.name] = tensors[c.name].double().reshape(c.size).clone()
+        for c in cls.COEFFS:  # finite, of the coefficient's size, and not below its fit bound's sign
+            value = expect_tensor(tensors, c.name, None, owner=f"{cls.NAME} model", nonneg=c.lower >= 0)
+            if value.numel() != c.size:
+                raise ModelFileError(f"{cls.NAME} model: tensor {c.name!r} has {value.numel()} value(s), expected {c.size}")
+            model.coeffs[c.name] = value.double().reshape(c.size).clone()
         if metadata.get("fit_loss") is not None:
             model.fit_loss = float(metadata["fit_loss"])
             model.fit_info = {k: v for k, v in metadata.items() if k != "fit_loss"}

@@ -14,6 +14,7 @@ import torch
 
 from brdfbench import merl
 from brdfbench.protocol import Material, Representation
+from brdfbench.state_checks import expect_tensor
 
 
 def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
@@ -63,7 +64,7 @@ class Lambert(Representation):
     @classmethod
     def from_state(cls, params, tensors, metadata):
         model = cls(**params)
-        model.albedo = tensors["albedo"].double()
+        model.albedo = expect_tensor(tensors, "albedo", (3,), owner="lambert model", nonneg=True).double()
         return model
 
     @property

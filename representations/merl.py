@@ -18,6 +18,7 @@ from brdfbench import merl
 from brdfbench.errors import ConfigError
 from brdfbench.merl import MerlTable
 from brdfbench.protocol import Material, Representation
+from brdfbench.state_checks import expect_tensor
 
 MODES = ("nearest", "trilinear")
 DENSITIES = (1, 2, 4, 8, 16, 24, 32)
@@ -100,10 +101,15 @@ class TabulatedMERL(Representation):
     @classmethod
     def from_state(cls, params, tensors, metadata):
         model = cls(**params)
-        if "raw" in tensors:
-            model.table = MerlTable(tensors["raw"].double().numpy())
-        if "samples" in tensors:
-            model.samples = tensors["samples"].double().numpy()
+        owner = "merl model"
+        raw = expect_tensor(tensors, "raw", (3, *merl.SHAPE), owner=owner, required=False)
+        if raw is not None:
+            model.table = MerlTable(raw.double().numpy())
+        x = model.downsample
+        blocks = (3, *(math.ceil(n / x) for n in merl.SHAPE))
+        samples = expect_tensor(tensors, "samples", blocks, owner=owner, required=False)
+        if samples is not None:
+            model.samples = samples.double().numpy()
         return model
 
     def drjit_kernel(self):

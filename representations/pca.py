@@ -28,6 +28,7 @@ import torch
 from brdfbench import logrel, merl
 from brdfbench.errors import ConfigError, DataError, ModelFileError
 from brdfbench.protocol import Material, Representation
+from brdfbench.state_checks import expect_tensor
 
 from .merl import NEAREST_FLOPS
 
@@ -211,25 +212,13 @@ class PCA(Representation):
         model = cls(**params)
         cells, _ = _domain()
         p = cells.numel()
-        expected = {"reference": (3, p), "mean": (p,)}
-        for name, shape in expected.items():
-            if name in tensors and tuple(tensors[name].shape) != shape:
-                raise ModelFileError(f"pca model: tensor {name!r} has shape {tuple(tensors[name].shape)}, expected {shape}")
-        if "basis" in tensors:
-            basis = tensors["basis"]
-            if basis.ndim != 2 or basis.shape[0] != p:
-                raise ModelFileError(
-                    f"pca model: basis has shape {tuple(basis.shape)}, which does not match the MERL table's "
-                    f"{p} cells above the horizon"
-                )
-            if "coefficients" in tensors and tuple(tensors["coefficients"].shape) != (3, basis.shape[1]):
-                raise ModelFileError(
-                    f"pca model: coefficients have shape {tuple(tensors['coefficients'].shape)}, expected (3, {basis.shape[1]})"
-                )
-        model.reference = tensors.get("reference")
-        model.mean = tensors.get("mean")
-        model.basis = tensors.get("basis")
-        model.coefficients = tensors.get("coefficients")
+        owner = "pca model"
+        got = {name: expect_tensor(tensors, name, shape, owner=owner, required=False)
+               for name, shape in (("reference", (3, p)), ("mean", (p,)), ("basis", (p, None)))}
+        k = None if got["basis"] is None else got["basis"].shape[1]
+        got["coefficients"] = expect_tensor(tensors, "coefficients", (3, k), owner=owner, required=False)
+        model.reference, model.mean, model.basis, model.coefficients = (
+            got["reference"], got["mean"], got["basis"], got["coefficients"])
         return model
 
     @property

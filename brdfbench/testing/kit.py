@@ -172,6 +172,54 @@ def check_save_load_roundtrip(ctx: Context) -> None:
         assert torch.equal(a, b), f"loaded model differs by up to {float((a - b).abs().max()):.3g} ({dtype})"
 
 
+def _broken_states(state: dict[str, torch.Tensor]):
+    """(what, tensors) pairs: the fitted state with one floating-point tensor spoilt, each way
+    a file from elsewhere may be: a NaN, an infinity, one value too many on the last axis."""
+    for name, t in state.items():
+        if not isinstance(t, torch.Tensor) or not t.dtype.is_floating_point or t.numel() == 0:
+            continue
+        flat = t.detach().to("cpu").contiguous()
+        for what, value in (("a NaN", float("nan")), ("+Inf", float("inf"))):
+            spoilt = flat.clone().reshape(-1)
+            spoilt[spoilt.numel() // 2] = value
+            yield f"tensor {name!r} holding {what}", {**state, name: spoilt.reshape(flat.shape)}
+        shape = (*flat.shape[:-1], flat.shape[-1] + 1) if flat.ndim else (2,)
+        grown = torch.cat([flat.reshape(-1), flat.reshape(-1)[:1]]) if flat.ndim <= 1 else \
+            torch.cat([flat, flat[..., :1]], dim=-1)
+        yield f"tensor {name!r} of shape {tuple(shape)} (saved: {tuple(flat.shape)})", {**state, name: grown.reshape(shape)}
+
+
+@check()
+def check_load_refuses_broken_state(ctx: Context) -> None:
+    """A model file is data from anywhere: `from_state` must refuse NaN, infinite and misshapen
+    tensors (brdfbench.state_checks.expect_tensor does it), and the refusal must name the file."""
+    from safetensors.torch import load_file, save_file
+    from safetensors import safe_open
+
+    with tempfile.TemporaryDirectory() as tmp:
+        good = modelio.save(ctx.model, ctx.spec.name, Path(tmp) / "model.safetensors")
+        with safe_open(str(good), framework="pt") as f:
+            header = f.metadata()
+        state = load_file(str(good))
+        cases = list(_broken_states(state))
+        if not cases:
+            raise unittest.SkipTest("the fitted model saves no floating-point tensor")
+        for i, (what, tensors) in enumerate(cases):
+            path = Path(tmp) / f"broken-{i}.safetensors"
+            save_file({k: v.contiguous() for k, v in tensors.items()}, str(path), metadata=header)
+            try:
+                modelio.load(path)
+            except Exception as exc:  # noqa: BLE001 - any refusal, as long as it is a clear one
+                from ..errors import BrdfbenchError
+
+                assert isinstance(exc, BrdfbenchError), (
+                    f"a file with {what} raised {type(exc).__name__} ({exc}), not a ModelFileError naming the file")
+                assert str(path) in str(exc), f"the refusal of a file with {what} does not name the file: {exc}"
+            else:
+                raise AssertionError(f"a file with {what} was loaded; from_state must check the tensors it is given "
+                                     "(brdfbench.state_checks.expect_tensor)")
+
+
 def _log_error(model: Representation, wi: torch.Tensor, wo: torch.Tensor, ref: torch.Tensor) -> float:
     """Mean |log(1 + f cos θi) − log(1 + ref cos θi)| of a model at host pairs."""
     device = model.device

@@ -13,6 +13,7 @@ import math
 import torch
 from brdfbench.protocol import Representation
 from brdfbench.specs import RepresentationSpec
+from brdfbench.state_checks import expect_tensor
 
 
 class Phong(Representation):
@@ -40,8 +41,8 @@ class Phong(Representation):
 
     @classmethod
     def from_state(cls, params, tensors, metadata):
-        model = cls(**params)
-        model.kd, model.ks = tensors["kd"], tensors["ks"]
+        model = cls(**params)  # a model file is data from anywhere: its tensors are checked
+        model.kd, model.ks = (expect_tensor(tensors, k, (3,), owner="acme_phong model", nonneg=True) for k in ("kd", "ks"))
         return model
 
 

@@ -100,6 +100,18 @@ class AcceptsAnyDevice(Lambert):
         return self
 
 
+class LoadsAnything(Lambert):
+    """Takes whatever a model file holds: a NaN or misshapen albedo is loaded as it is."""
+
+    tags = Lambert.tags
+
+    @classmethod
+    def from_state(cls, params, tensors, metadata):
+        model = cls(**params)
+        model.albedo = tensors["albedo"].double()
+        return model
+
+
 def _spec(cls, name, **kw):
     spec = RepresentationSpec(name=name, description="test plugin", target=f"{__name__}:{cls.__name__}", tags=Lambert.tags, **kw)
     registry.register("representations", spec)
@@ -115,6 +127,7 @@ def _spec(cls, name, **kw):
         (DeclaresAnUnknownDevice, "devices_declared"),
         (MovesBadly, "devices_declared"),
         (AcceptsAnyDevice, "devices_declared"),
+        (LoadsAnything, "load_refuses_broken_state"),
     ],
 )
 def test_kit_catches_broken_plugins(cls, failing):

@@ -401,7 +401,7 @@ BAD_FILES = {
     "pt-list": ("w.pt", _pt([torch.zeros(3)]), ModelFileError, ["list"]),
     "pt-not-a-tensor": ("w.pt", _state(fc1_weight=[1.0, 2.0]), ModelFileError, ["fc1.weight", "list"]),
     "pt-wrong-length-vector": ("w.pt", _pt(torch.zeros(600)), ModelFileError, ["600", "675"]),
-    "pt-garbage": ("w.pt", lambda p: p.write_bytes(b"\x00" * 64), ModelFileError, ["weights_only"]),
+    "pt-garbage": ("w.pt", lambda p: p.write_bytes(b"\x00" * 64), ModelFileError, ["not a torch file", "accepted"]),
     "h5-missing-layer": ("w.h5", _h5(skip="b2"), ModelFileError, ["dense_2/dense_2/bias:0", "missing"]),
     "h5-mis-shaped": ("w.h5", _h5(override={"W2": np.zeros((21, 20), np.float32)}), ModelFileError,
                       ["dense_2/dense_2/kernel:0", "(21, 20)"]),
@@ -431,7 +431,7 @@ def _pickled_pt(path, marker):
 
 
 @pytest.mark.parametrize("name, write, says", [("obj.npy", _object_npy, "never unpickled"),
-                                               ("evil.pt", _pickled_pt, "weights_only")])
+                                               ("evil.pt", _pickled_pt, "nothing in it ran")])
 def test_pickles_are_refused_without_unpickling(tmp_path, name, write, says):
     marker = tmp_path / "unpickled"
     path = tmp_path / name
@@ -439,6 +439,7 @@ def test_pickles_are_refused_without_unpickling(tmp_path, name, write, says):
     with pytest.raises(ModelFileError, match=says) as info:
         nf.read_network(path)
     assert str(path) in str(info.value)
+    assert "weights_only" not in str(info.value) and "\n" not in str(info.value)  # none of torch's advice
     assert not marker.exists()
 
 
