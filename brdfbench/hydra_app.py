@@ -18,7 +18,7 @@ from omegaconf import DictConfig
 
 from .errors import BrdfbenchError, os_error
 from .hydra_callbacks import finish
-from .hydra_choices import check_group_choices
+from .hydra_choices import check_group_choices, check_words
 from .hydra_config import JOB_SUMMARY, to_run_config, write_summary
 
 __all__ = ["JOB_SUMMARY", "run_hydra", "to_run_config"]
@@ -65,6 +65,10 @@ def run_hydra(argv: list[str]) -> int:
     # `brdfbench harness=render scene=sphere_envmap -m representation=merl,nbrdf`.
     flags = [a for a in argv if a in ("-m", "--multirun")]
     try:
+        from .cli import SUBCOMMANDS
+        from .hydra_config import TOP_LEVEL
+
+        check_words(argv, SUBCOMMANDS, tuple(sorted(TOP_LEVEL)))
         check_group_choices([a for a in argv if not a.startswith("-")])
     except BrdfbenchError as exc:
         print(f"brdfbench: error: {exc}", file=sys.stderr, flush=True)

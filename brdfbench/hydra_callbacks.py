@@ -74,7 +74,9 @@ def validate_jobs(config: DictConfig, config_name: str | None) -> list[tuple[int
         except BrdfbenchError as exc:
             problems.append((num, overrides, str(exc)))
         except Exception as exc:  # Hydra's own composition errors name the override
-            problems.append((num, overrides, str(exc).splitlines()[0]))
+            from .hydra_choices import compose_error_line
+
+            problems.append((num, overrides, compose_error_line(exc)))
     return problems
 
 
@@ -182,7 +184,8 @@ class SweepCallback(Callback):
         self.expected = None if jobs is None else len(jobs)
         problems = validate_jobs(config, config_name)
         if problems:
-            if self.expected == 1:  # a lone job: its error alone
+            if self.expected == 1 or (len(problems) == self.expected and len({p[2] for p in problems}) == 1):
+                # a lone job, or every job for the same reason (a key on the command line): the error once
                 print(f"brdfbench: error: {problems[0][2]}", file=sys.stderr, flush=True)
                 raise SystemExit(2)
             for num, overrides, error in problems:

@@ -128,8 +128,8 @@ def test_inspect_of_a_model_naming_another_representation_is_one_line(tmp_path, 
 
 
 @pytest.mark.parametrize("override, named", [
-    ("profile=nope", "profile='nope': no such profile config; expected one of first_look, full"),
-    ("dataset=nope", "dataset='nope': no such dataset config; expected one of "),
+    ("profile=nope", "profile='nope': no such profile config (expected one of first_look, full)"),
+    ("dataset=nope", "dataset='nope': no such dataset config (expected one of "),
     ("representation=lambert,lambret", "representation='lambret': no such representation config"),
 ])
 def test_an_unknown_config_choice_is_one_line_naming_the_group_and_its_options(tmp_path, override, named, cli):

@@ -23,13 +23,15 @@ def test_a_bad_override_in_any_job_fails_before_any_work(tmp_path, cli):
                f"results_dir={res}", cwd=tmp_path)
     assert out.returncode == 2, out.stdout + out.stderr
     assert "job 0" in out.stderr and "'cubic'" in out.stderr and "nothing was run" in out.stderr
+    # lambert takes no mode: Hydra's several lines become one naming the key
+    assert "representation.params.mode: representation.params has no key 'mode'" in out.stderr
     assert not (res / "brdfbench.sqlite").exists()
 
     out = cli("-m", "representation=lambert,lambret", *SMALL, "limit=1", f"results_dir={res}", cwd=tmp_path)
     assert out.returncode == 2
     assert out.stderr.strip().splitlines() == [
-        "brdfbench: error: representation='lambret': no such representation config; expected one of "
-        + out.stderr.split("expected one of ", 1)[1].strip()]
+        "brdfbench: error: representation='lambret': no such representation config; did you mean "
+        "representation=lambert? (expected one of " + out.stderr.split("expected one of ", 1)[1].strip()]
     assert "lambert" in out.stderr.split("expected one of ", 1)[1]
     assert not (res / "brdfbench.sqlite").exists()
 
