@@ -43,12 +43,21 @@ def cmd_list(args) -> int:
     group = args.group
     if group and group not in registry.GROUPS and f"{group}s" in registry.GROUPS:
         group = f"{group}s"  # accept the singular, as in the config groups
+    if group and group not in registry.GROUPS:
+        raise BrdfbenchError(f"unknown plugin group {group!r}; groups are {', '.join(registry.GROUPS)}")
     groups = [group] if group else list(registry.GROUPS)
+    broken = []
     for group in groups:
         for name in registry.names(group):
-            spec = registry.get(group, name)
+            try:
+                spec = registry.get(group, name)
+            except BrdfbenchError as exc:  # one broken third-party entry point: list the rest, name it
+                broken.append(str(exc))
+                continue
             print(f"{group:16s} {name:16s} {spec.description}")
-    return 0
+    for message in broken:
+        print(f"brdfbench: error: {message}", file=sys.stderr)
+    return 1 if broken else 0
 
 
 def cmd_report(args) -> int:

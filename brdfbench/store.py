@@ -47,6 +47,8 @@ COLUMNS = [f.name for f in fields(Row)]
 def sqlite_store(results_dir: Path, create: bool = True, file: str = STORE_FILE) -> "ResultsStore":
     """The `sqlite` store plugin: `file` inside the results folder (`create=False`: it must exist)."""
     path = Path(results_dir) / file
+    if not create and path.is_dir():
+        raise DataError(f"{path}: the results store path is a directory, not a store file; move it aside")
     if not create and not path.is_file():
         raise DataError(f"{path}: no results store here (run the benchmark first)")
     return ResultsStore(path)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 import stat
 from pathlib import Path
@@ -14,6 +15,8 @@ from ..protocol import Material
 from . import Dataset
 from .content_hash import file_digests
 
+log = logging.getLogger(__name__)
+_warned: set[str] = set()  # entries already reported by this process (validation lists the folder again)
 SUFFIX = ".binary"
 #: 2: files are fingerprinted by content (sha256), no longer by size and mtime.
 FINGERPRINT_VERSION = 2
@@ -41,6 +44,12 @@ def _check_folder(folder: Path) -> None:
     raise DataError(f"{folder}: is a file, not a directory; {_HINT}")
 
 
+def _warn_once(path: str, what: str) -> None:
+    if path not in _warned:
+        _warned.add(path)
+        log.warning("%s: %s", path, what)
+
+
 def _list(folder: Path, recursive: bool) -> dict[str, Path]:
     """Material name -> file, for the `.binary` files in `folder`; an unlistable folder raises."""
     files: dict[str, Path] = {}
@@ -58,9 +67,13 @@ def _list(folder: Path, recursive: bool) -> dict[str, Path]:
                 if entry.is_dir(follow_symlinks=False):
                     if recursive:
                         pending.append(Path(entry.path))
+                    elif entry.name.endswith(SUFFIX):
+                        _warn_once(entry.path, "a folder named like a MERL file, skipped (recursive=true reads its files)")
                 elif entry.name.endswith(SUFFIX) and entry.is_file():
                     path = Path(entry.path)
                     files[path.relative_to(folder).with_suffix("").as_posix()] = path
+                elif entry.name.endswith(SUFFIX):
+                    _warn_once(entry.path, "not a regular file (a broken link, a pipe or a device), skipped")
             except OSError as exc:
                 raise DataError(f"{entry.path}: cannot stat ({_why(exc)})") from None
     return files
