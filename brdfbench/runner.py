@@ -79,10 +79,16 @@ def _run_isolated(cfg: RunConfig, plan, recorder: Recorder, on_cell, on_note) ->
                 on_cell((name, plan.category(name), [], "failed", message, 1))
 
 
+_INLINE_WARNED: set[str] = set()  # warnings of in-process runs given once per process
+
+
 def _run_inline(cfg: RunConfig, plan, recorder: Recorder, on_cell, on_note) -> None:
     import torch
 
     log.warning("isolate=false: cells run in this process with no time limit")
+    if cfg.harness.memory_limit is not None and "memory_limit" not in _INLINE_WARNED:
+        _INLINE_WARNED.add("memory_limit")
+        log.warning("isolate=false: harness.memory_limit is not enforced (only a worker process can be stopped)")
     state = job_state(cfg)
     if cfg.threads:
         apply_threads(cfg.threads)

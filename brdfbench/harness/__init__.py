@@ -51,13 +51,21 @@ class HarnessConfig:
     dtype: str = field(default="float32", metadata={"choices": DTYPES})
     folds: int = field(default=4, metadata={"min": 2})  # cross-validation folds of representations that train on a split
     timeout_s: float | None = field(default=600.0, metadata={"min_exclusive": 0})  # per cell; run control, not hashed
+    # resident memory a worker process may hold ("1500MiB", "2GiB", bytes; None: no limit),
+    # enforced by the supervisor (SIGKILL, a failure row); stored as bytes; run control, not hashed
+    memory_limit: int | str | None = None
 
     #: Keys that control how a run goes, not what it measures: left out of the config hash.
-    RUN_CONTROL: ClassVar[tuple[str, ...]] = ("timeout_s",)
+    RUN_CONTROL: ClassVar[tuple[str, ...]] = ("timeout_s", "memory_limit")
 
     def __post_init__(self):
         hints = typing.get_type_hints(type(self))
         for f in dataclasses.fields(self):
+            if f.name == "memory_limit":
+                from ..pipeline.memory import parse_size
+
+                object.__setattr__(self, f.name, parse_size(self.memory_limit, "harness.memory_limit"))
+                continue
             object.__setattr__(self, f.name, check_value(f"harness.{f.name}", getattr(self, f.name), hints[f.name],
                                                          f.metadata))
 

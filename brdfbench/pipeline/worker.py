@@ -7,6 +7,13 @@ when the worker dies (a segfault, `os._exit`, the out-of-memory killer), the sup
 reads the cause from its exit status. Either way the task's unfinished materials become
 failure rows naming the cause, and the next task gets a fresh worker.
 
+Under `harness.memory_limit` the supervisor also reads the worker's resident memory from
+/proc/<pid>/status about every `MEMORY_POLL_S` seconds while it waits (VmRSS of the worker
+and its child processes, and the worker's own high-water mark VmHWM, which catches a spike
+between two looks); over the limit, the worker is killed (SIGKILL) and the task's
+unfinished cells fail naming the limit and the peak reached. A worker that lives on over
+the limit between tasks (caches) is replaced by a fresh one before the next task.
+
 A worker is started with `spawn` (a fresh interpreter: no inherited locks or threads from
 torch, drjit or LLVM) and lives on across tasks and jobs of one process, keeping what a
 job built (harness, simulators, direction sets). Each task carries the caller's
@@ -30,6 +37,7 @@ from typing import Callable
 from .. import registry
 from ..errors import BrdfbenchError
 from .config import RunConfig
+from .memory import format_size, process_peak, process_rss, reset_process_peak
 from .plan import Task
 
 log = logging.getLogger(__name__)
@@ -38,6 +46,8 @@ log = logging.getLogger(__name__)
 START_TIMEOUT_S = 300.0
 #: The least time a job's setup in the worker (plugins, data, harness) is allowed.
 SETUP_MIN_S = 120.0
+#: Seconds between the supervisor's looks at a worker's resident memory (harness.memory_limit).
+MEMORY_POLL_S = 0.05
 
 _SIGNALS = {
     signal.SIGSEGV: "segmentation fault (SIGSEGV)",
@@ -65,7 +75,8 @@ def exit_cause(code: int | None) -> str:
 
 @dataclass
 class Outcome:
-    """How a task ended: "done", "timeout" or "died", with the words for the last two."""
+    """How a task ended: "done", "timeout", "memory" (over harness.memory_limit) or "died",
+    with the words for all but the first."""
 
     status: str
     message: str = ""
@@ -79,6 +90,8 @@ class Worker:
         self.conn = None
         self.threads = 0
         self.device = ("cpu", "cpu")  # (name, description) of the device the current job computes on
+        self.tasks = 0  # tasks sent to this worker process (0: a fresh one)
+        self.draining = False  # reading what a killed worker had sent
 
     def _start(self) -> None:
         # a spawned child inherits the parent's start-method name: under joblib's loky workers
@@ -92,6 +105,7 @@ class Worker:
             self.process.start()
         child.close()
         self.conn = parent
+        self.tasks = 0
         if not parent.poll(START_TIMEOUT_S):
             self.stop(kill=True)
             raise BrdfbenchError(f"the worker process did not start within {START_TIMEOUT_S:g} s")
@@ -106,11 +120,24 @@ class Worker:
     def alive(self) -> bool:
         return self.process is not None and self.process.is_alive()
 
-    def stop(self, kill: bool = False) -> None:
+    def stop(self, kill: bool = False, drain: Callable[[tuple], object] | None = None) -> None:
+        """End the worker: ask it to return (or, `kill`, SIGKILL it). `drain` is given each
+        message it sent before it ended that was not yet read (e.g. cells finished just
+        before a kill)."""
         if self.process is None:
             return
         if kill:
             self.process.kill()
+            if drain is not None:
+                self.process.join()
+                self.draining = True
+                try:
+                    while self.conn.poll(0):
+                        drain(self.conn.recv())
+                except (OSError, EOFError):  # the last message, cut short by the kill
+                    pass
+                finally:
+                    self.draining = False
         else:
             try:
                 self.conn.send(None)
@@ -135,30 +162,26 @@ class Worker:
             on_note: Callable[[str], None] = lambda note: None,
             on_device: Callable[[tuple[str, str]], None] = lambda device: None) -> Outcome:
         self.ensure()
+        limit = self._memory_limit(job)
+        if limit is not None:
+            early = self._fit_memory(limit)
+            if early is not None:
+                return early
+        self.tasks += 1
         envelope = (dict(os.environ), os.getcwd(), registry.snapshot(), job, task)
+        if limit is not None:
+            reset_process_peak(self.process.pid)  # the task's peak, not one left from an earlier task
         self.conn.send(envelope)
         timeout = job.harness.timeout_s
         deadline_budget = None if timeout is None else max(timeout, SETUP_MIN_S)
         what = f"setting up {job.label}"
         deadline = None if deadline_budget is None else time.monotonic() + deadline_budget
         fatal = None
-        while True:
-            wait = None if deadline is None else max(0.0, deadline - time.monotonic())
-            try:
-                ready = self.conn.poll(wait)
-            except (OSError, EOFError):
-                ready = True
-            if not ready:
-                self.stop(kill=True)
-                return Outcome("timeout", f"{what} exceeded the time limit of {deadline_budget:g} s "
-                                          "(worker process killed)")
-            try:
-                msg = self.conn.recv()
-            except (OSError, EOFError):
-                self.process.join(timeout=10)
-                cause = exit_cause(self.process.exitcode)
-                self.stop(kill=True)
-                return Outcome("died", f"worker process died while {what}: {cause}")
+        peak = 0
+        next_look = 0.0
+
+        def handle(msg) -> Outcome | None:
+            nonlocal deadline_budget, what, deadline, fatal
             kind = msg[0]
             if kind == "phase":
                 deadline_budget, what = msg[1], msg[2]
@@ -166,7 +189,12 @@ class Worker:
                 if msg[3] is not None:
                     on_note(msg[3])
             elif kind == "cell":
-                on_cell(msg[1:])
+                try:
+                    on_cell(msg[1:])
+                except BaseException:  # the cell could not be recorded (a full disk): the task's later
+                    if not self.draining:  # messages would be read by the next task, so the worker goes
+                        self.stop(kill=True)
+                    raise
             elif kind == "threads":
                 self.threads = msg[1]
             elif kind == "device":  # sent before the job's first cell
@@ -178,6 +206,69 @@ class Worker:
                 if fatal is not None:
                     raise fatal
                 return Outcome("done")
+            return None
+
+        while True:
+            wait = None if deadline is None else max(0.0, deadline - time.monotonic())
+            if limit is not None:
+                wait = MEMORY_POLL_S if wait is None else min(wait, MEMORY_POLL_S)
+            try:
+                ready = self.conn.poll(wait)
+            except (OSError, EOFError):
+                ready = True
+            if limit is not None and time.monotonic() >= next_look:
+                next_look = time.monotonic() + MEMORY_POLL_S
+                peak = max(peak, process_rss(self.process.pid) or 0, process_peak(self.process.pid) or 0)
+                if peak > limit:
+                    ended: list[Outcome] = []  # a "done" sent just before the kill: the task had finished
+                    self.stop(kill=True, drain=lambda msg: ended.extend(o for o in [handle(msg)] if o is not None))
+                    if ended:
+                        return ended[0]
+                    return Outcome("memory", f"memory limit {format_size(limit)} exceeded (peak {format_size(peak, whole=True)}) "
+                                             f"while {what}: worker stopped")
+            if not ready:
+                if deadline is None or time.monotonic() < deadline:
+                    continue  # a look at the memory, not the end of the step's time
+                self.stop(kill=True)
+                return Outcome("timeout", f"{what} exceeded the time limit of {deadline_budget:g} s "
+                                          "(worker process killed)")
+            try:
+                msg = self.conn.recv()
+            except (OSError, EOFError):
+                self.process.join(timeout=10)
+                cause = exit_cause(self.process.exitcode)
+                self.stop(kill=True)
+                return Outcome("died", f"worker process died while {what}: {cause}")
+            outcome = handle(msg)
+            if outcome is not None:
+                return outcome
+
+    def _memory_limit(self, job: RunConfig) -> int | None:
+        """The job's harness.memory_limit in bytes, None where it has none or /proc cannot enforce it."""
+        limit = job.harness.memory_limit
+        if limit is not None and process_rss(self.process.pid, children=False) is None:
+            _warn_once("proc", "harness.memory_limit=%s is not enforced: this platform has no /proc/<pid>/status "
+                               "to read a worker's resident memory from", format_size(limit))
+            return None
+        return limit
+
+    def _fit_memory(self, limit: int) -> Outcome | None:
+        """Before a task: a worker that lives on over the limit (caches of earlier tasks) is
+        replaced by a fresh one; a fresh one already over it is stopped, failing the task."""
+        rss = process_rss(self.process.pid) or 0
+        if rss > limit and self.tasks:
+            log.info("the worker process holds %s, over harness.memory_limit=%s: starting a fresh one",
+                     format_size(rss), format_size(limit))
+            self.stop()
+            self._start()
+            rss = process_rss(self.process.pid) or 0
+        if rss > limit:
+            _warn_once(("fresh", limit), "harness.memory_limit=%s is below the resident memory of a fresh worker "
+                                         "process (%s): every cell under it fails", format_size(limit), format_size(rss, whole=True))
+            self.stop(kill=True)
+            return Outcome("memory", f"memory limit {format_size(limit)} exceeded (peak {format_size(rss, whole=True)}) "
+                                     "while starting the worker process: worker stopped")
+        return None
 
 
 @contextlib.contextmanager
@@ -194,6 +285,15 @@ def _main_module_hidden():
     finally:
         for k, v in saved.items():
             setattr(main, k, v)
+
+
+_WARNED: set = set()
+
+
+def _warn_once(key, message: str, *args) -> None:
+    if key not in _WARNED:
+        _WARNED.add(key)
+        log.warning(message, *args)
 
 
 _WORKER: Worker | None = None
