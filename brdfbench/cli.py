@@ -25,9 +25,9 @@ import os
 import sys
 from pathlib import Path
 
+from .cli_help import SUBCOMMANDS
 from .errors import BrdfbenchError
 
-SUBCOMMANDS = ("list", "report", "merge", "check", "inspect", "convert")
 EXIT_ERROR = 2
 EXIT_BROKEN_PIPE = 128 + 13  # as a process killed by SIGPIPE
 

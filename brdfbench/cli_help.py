@@ -11,6 +11,9 @@ import textwrap
 from importlib import resources
 from typing import Any
 
+#: The subcommands of `brdfbench` (anything else is a benchmark run's overrides).
+SUBCOMMANDS = ("list", "report", "merge", "check", "inspect", "convert")
+
 CONF_PACKAGE = "brdfbench_conf"
 GROUPS = ("representation", "dataset", "harness", "scene")
 WIDTH = 100

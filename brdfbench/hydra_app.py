@@ -65,7 +65,7 @@ def run_hydra(argv: list[str]) -> int:
     # `brdfbench harness=render scene=sphere_envmap -m representation=merl,nbrdf`.
     flags = [a for a in argv if a in ("-m", "--multirun")]
     try:
-        from .cli import SUBCOMMANDS
+        from .cli_help import SUBCOMMANDS
         from .hydra_config import TOP_LEVEL
 
         check_words(argv, SUBCOMMANDS, tuple(sorted(TOP_LEVEL)))
