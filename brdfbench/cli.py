@@ -91,13 +91,20 @@ def cmd_merge(args) -> int:
 
 
 def cmd_check(args) -> int:
+    """Each check runs in a worker process under `--timeout`: a plugin that crashes, ends
+    the process or hangs fails that check (naming the cause) and the others still run."""
     from . import registry
-    from .testing import check_generator, check_representation
+    from .testing.isolated import check_isolated
 
-    if args.name in registry.names("generators") and args.name not in registry.names("representations"):
-        report = check_generator(args.name, full=args.full)
-    else:
-        report = check_representation(args.name, n_pairs=args.pairs, full=args.full)
+    if args.timeout <= 0:
+        return _fail(f"--timeout must be a positive number of seconds, not {args.timeout:g}")
+    generator = args.name in registry.names("generators") and args.name not in registry.names("representations")
+
+    def progress(check: str, outcome: str, seconds: float) -> None:
+        print(f"brdfbench check: {outcome:8s} {check} ({seconds:.1f} s)", file=sys.stderr, flush=True)
+
+    report = check_isolated("generator" if generator else "representation", args.name, n_pairs=args.pairs,
+                            full=args.full, timeout_s=args.timeout, on_result=progress)
     print(report.summary())
     return 0 if report.passed else 1
 
@@ -155,6 +162,8 @@ def _subcommand_parser() -> argparse.ArgumentParser:
     p.add_argument("--pairs", type=int, default=10**6, help="adversarial direction pairs per dtype (default 1e6)")
     p.add_argument("--full", action="store_true",
                    help="fit with the representation's default parameters, not its quick check_params")
+    p.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",
+                   help="time limit of each check, run in a worker process (default 600)")
     p.set_defaults(func=cmd_check)
     p = sub.add_parser("inspect", help="describe a saved model or generator file")
     p.add_argument("path")

@@ -1,0 +1,195 @@
+"""The conformance kit run in a worker process, one check at a time, under a time limit.
+
+`brdfbench check` certifies code it does not trust: a plugin that segfaults, ends the
+process (`os._exit`) or hangs must fail the check it is in, not take the command down.
+The check names are enumerated here from the kit (`representation_checks` /
+`generator_checks`); the checks run in order in one spawned worker, which keeps the kit's
+context (the fitted model) from one check to the next. When the worker dies or a check
+overruns `timeout_s` (the worker is then killed with SIGKILL, which a plugin cannot
+ignore), that check fails naming the cause and a fresh worker goes on with the next one.
+
+The worker is started as the benchmark's cell workers are (`brdfbench.pipeline.worker`):
+`spawn`, the caller's environment variables, working folder and in-process plugin
+registrations, and it dies with its parent.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import signal
+import time
+from typing import Callable
+
+from .. import registry
+from ..pipeline.worker import START_TIMEOUT_S, _die_with_parent, _main_module_hidden, _sync_environment, exit_cause
+from .kit import DEFAULT_PAIRS, Check, ConformanceReport
+
+#: Seconds a check may run by default (`brdfbench check --timeout`).
+DEFAULT_TIMEOUT_S = 600.0
+KINDS = ("representation", "generator")
+
+
+def _checks(kind: str, name: str, n_pairs: int, full: bool) -> tuple[list[Check], dict]:
+    """The kit's checks for the plugin, and the constructor arguments they use."""
+    if kind == "generator":
+        from .generators import _resolve, generator_checks, kit_params
+
+        spec = _resolve(name)
+        return generator_checks(spec, full=full), kit_params(spec, full=full)
+    from .kit import _resolve, check_params, representation_checks
+
+    spec = _resolve(name)
+    return representation_checks(spec, n_pairs=n_pairs, full=full), check_params(spec, full=full)
+
+
+def check_isolated(kind: str, name: str, *, n_pairs: int = DEFAULT_PAIRS, full: bool = False,
+                   timeout_s: float = DEFAULT_TIMEOUT_S,
+                   on_result: Callable[[str, str, float], None] | None = None) -> ConformanceReport:
+    """Run the kit on representation or generator `name`, each check in a worker process
+    limited to `timeout_s`; a check the worker died or overran in is "failed" (or
+    "xfailed", if declared) with the cause. `on_result(check, outcome, seconds)` is called
+    as each check ends."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, not {kind!r}")
+    checks, params = _checks(kind, name, n_pairs, full)
+    report = ConformanceReport(checks[0].spec_name if checks else name, params=params)
+    job = (kind, name, n_pairs, full)
+    worker: _CheckWorker | None = None
+    finished = False
+    try:
+        for i, check in enumerate(checks):
+            started = time.monotonic()
+            if worker is None:
+                worker = _CheckWorker(job)
+                failure = worker.start()
+                if failure is not None:  # no check can run: each one left says why
+                    worker = None
+                    for left in checks[i:]:
+                        _fail(report, left, f"not run: {failure}")
+                        if on_result:
+                            on_result(left.name, report.outcomes[left.name], 0.0)
+                    break
+            outcome, detail, crashed = worker.run(check.name, timeout_s)
+            if crashed:
+                worker = None  # the next check gets a fresh worker
+                _fail(report, check, detail)
+            else:
+                report.outcomes[check.name] = outcome
+                if detail is not None:
+                    report.details[check.name] = detail
+            if on_result:
+                on_result(check.name, report.outcomes[check.name], time.monotonic() - started)
+        finished = True
+    finally:
+        if worker is not None:  # cut short (Ctrl-C): the worker may be mid-check, so it is killed
+            worker.stop(kill=not finished)
+    return report
+
+
+def _fail(report: ConformanceReport, check: Check, why: str) -> None:
+    """Record `check` as failed (xfailed where declared) because of `why`, as the kit would."""
+    report.outcomes[check.name] = "xfailed" if check.xfail_reason else "failed"
+    report.details[check.name] = (f"expected: {check.xfail_reason}; " if check.xfail_reason else "") + why
+
+
+class _CheckWorker:
+    """One spawned worker holding one plugin's kit context; `run(check, timeout_s)` runs a
+    check in it and returns (outcome, detail, crashed)."""
+
+    def __init__(self, job: tuple):
+        self.job = job
+        self.process = None
+        self.conn = None
+
+    def start(self) -> str | None:
+        """Start the worker and have it build the checks; None, or why it could not."""
+        ctx = mp.get_context("spawn")
+        parent, child = ctx.Pipe()
+        self.process = ctx.Process(target=_worker_main, args=(child,), name="brdfbench-check", daemon=False)
+        with _main_module_hidden():
+            self.process.start()
+        child.close()
+        self.conn = parent
+        parent.send((dict(os.environ), os.getcwd(), registry.snapshot(), self.job))
+        try:
+            if not parent.poll(START_TIMEOUT_S):
+                self.stop(kill=True)
+                return f"the worker process did not start within {START_TIMEOUT_S:g} s"
+            msg = parent.recv()
+        except (OSError, EOFError):
+            cause = self._exit_cause()
+            self.stop(kill=True)
+            return f"the worker process failed to start: {cause}"
+        if msg[0] != "ready":
+            self.stop(kill=True)
+            return f"the worker process could not build the checks: {msg[1]}"
+        return None
+
+    def run(self, check: str, timeout_s: float) -> tuple[str | None, str | None, bool]:
+        try:
+            self.conn.send(check)
+            ready = self.conn.poll(timeout_s)
+        except (OSError, EOFError):
+            ready = True  # the worker is gone: recv says so
+        if not ready:
+            self.stop(kill=True)
+            return None, f"exceeded the time limit of {timeout_s:g} s (worker killed)", True
+        try:
+            _, outcome, detail = self.conn.recv()
+        except (OSError, EOFError):
+            cause = self._exit_cause()
+            self.stop(kill=True)
+            return None, f"worker died: {cause} during this check", True
+        return outcome, detail, False
+
+    def _exit_cause(self) -> str:
+        self.process.join(timeout=10)
+        return exit_cause(self.process.exitcode)
+
+    def stop(self, kill: bool = False) -> None:
+        """End the worker: ask it to return, or SIGKILL it (`kill`, or when it does not)."""
+        if self.process is None:
+            return
+        if not kill:
+            try:
+                self.conn.send(None)
+            except (OSError, EOFError):
+                pass
+            self.process.join(timeout=10)
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join()
+        self.conn.close()
+        self.process = self.conn = None
+
+
+# --------------------------------------------------------------------------- inside the worker
+
+
+def _worker_main(conn) -> None:
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the parent, which kills us
+    env, cwd, extra, (kind, name, n_pairs, full) = conn.recv()
+    _sync_environment(env, cwd)
+    registry.restore(extra)
+    try:
+        checks = {c.name: c for c in _checks(kind, name, n_pairs, full)[0]}
+    except Exception as exc:  # noqa: BLE001 - reported to the parent, which fails the checks
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        return
+    conn.send(("ready",))
+    while True:
+        try:
+            check = conn.recv()
+        except (EOFError, OSError):
+            return
+        if check is None:
+            return
+        report = ConformanceReport(name)
+        if check in checks:
+            report.run(checks[check])
+        else:
+            report.outcomes[check] = "failed"
+            report.details[check] = "the worker process found no such check"
+        conn.send(("result", report.outcomes[check], report.details.get(check)))
