@@ -182,3 +182,25 @@ def fitted():
         return cache[key]
 
     return get
+
+
+@pytest.fixture
+def plugin():
+    """`plugin(cls, name=None)`: register a test representation class (Lambert's tags) in
+    this process for the test's life; returns its name (default: the class name, lowercased)."""
+    from brdfbench import registry
+    from brdfbench.specs import RepresentationSpec
+    from brdfbench_representations.lambert import Lambert
+
+    added = []
+
+    def add(cls, name=None):
+        name = name or cls.__name__.lower()
+        registry.register("representations", RepresentationSpec(
+            name=name, description="test", target=f"{cls.__module__}:{cls.__name__}", tags=Lambert.tags))
+        added.append(name)
+        return name
+
+    yield add
+    for name in added:
+        registry.unregister("representations", name)

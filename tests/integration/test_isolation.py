@@ -12,9 +12,7 @@ import time
 import pytest
 import torch
 
-from brdfbench import registry
 from brdfbench.runner import RunConfig, harness_config, run
-from brdfbench.specs import RepresentationSpec
 from brdfbench.store import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
@@ -67,22 +65,6 @@ class ReturnsNaN(Lambert):
         super().fit(target, seed=seed)
         self.nan = _victim(target)
         return self
-
-
-@pytest.fixture
-def plugin():
-    added = []
-
-    def add(cls):
-        name = cls.__name__.lower()
-        registry.register("representations", RepresentationSpec(name=name, description="test",
-                                                                target=f"{__name__}:{cls.__name__}", tags=Lambert.tags))
-        added.append(name)
-        return name
-
-    yield add
-    for name in added:
-        registry.unregister("representations", name)
 
 
 def _run(tmp_path, synthetic_cache, name, harness=QUICK, limit=3):

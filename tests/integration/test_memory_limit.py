@@ -22,7 +22,6 @@ from brdfbench.pipeline.plan import hashed_config
 from brdfbench.pipeline.worker import shared_worker
 from brdfbench.provenance import config_hash
 from brdfbench.runner import RunConfig, run
-from brdfbench.specs import RepresentationSpec
 from brdfbench.store import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
@@ -49,22 +48,6 @@ class Leaks(Lambert):
     def fit(self, target, *, seed=0):
         _HELD.append(np.ones(GiB, dtype=np.uint8))
         return super().fit(target, seed=seed)
-
-
-@pytest.fixture
-def plugin():
-    added = []
-
-    def add(cls):
-        name = cls.__name__.lower()
-        registry.register("representations", RepresentationSpec(name=name, description="test",
-                                                                target=f"{__name__}:{cls.__name__}", tags=Lambert.tags))
-        added.append(name)
-        return name
-
-    yield add
-    for name in added:
-        registry.unregister("representations", name)
 
 
 def _cfg(tmp_path, synthetic_cache, name, harness=QUICK, limit=3, **kw):

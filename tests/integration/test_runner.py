@@ -5,11 +5,9 @@ import time
 
 import pytest
 
-from brdfbench import registry
 from brdfbench.errors import ConfigError
 from brdfbench.report import write_reports
 from brdfbench.runner import RunConfig, harness_config, run
-from brdfbench.specs import RepresentationSpec
 from brdfbench.store import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
@@ -27,21 +25,6 @@ class Hangs(Lambert):
     def fit(self, target, *, seed=0):
         time.sleep(30)
         return self
-
-
-@pytest.fixture
-def plugin():
-    added = []
-
-    def add(cls, name):
-        spec = RepresentationSpec(name=name, description="test", target=f"{__name__}:{cls.__name__}", tags=Lambert.tags)
-        registry.register("representations", spec)
-        added.append(name)
-        return name
-
-    yield add
-    for name in added:
-        registry.unregister("representations", name)
 
 
 def _cfg(tmp_path, synthetic_cache, name, **kw):
