@@ -99,6 +99,7 @@ def cmd_check(args) -> int:
     if args.timeout <= 0:
         return _fail(f"--timeout must be a positive number of seconds, not {args.timeout:g}")
     generator = args.name in registry.names("generators") and args.name not in registry.names("representations")
+    registry.get("generators" if generator else "representations", args.name)  # an unknown name: one line, exit 2
 
     def progress(check: str, outcome: str, seconds: float) -> None:
         print(f"brdfbench check: {outcome:8s} {check} ({seconds:.1f} s)", file=sys.stderr, flush=True)

@@ -2,8 +2,9 @@
 
 `brdfbench check` certifies code it does not trust: a plugin that segfaults, ends the
 process (`os._exit`) or hangs must fail the check it is in, not take the command down.
-The check names are enumerated here from the kit (`representation_checks` /
-`generator_checks`); the checks run in order in one spawned worker, which keeps the kit's
+The check names are enumerated by the first worker from the kit (`representation_checks`
+/ `generator_checks`: the plugin is never imported by the command itself); the checks run
+in order in one spawned worker, which keeps the kit's
 context (the fitted model) from one check to the next. When the worker dies or a check
 overruns `timeout_s` (the worker is then killed with SIGKILL, which a plugin cannot
 ignore), that check fails naming the cause and a fresh worker goes on with the next one.
@@ -19,6 +20,7 @@ import multiprocessing as mp
 import os
 import signal
 import time
+from dataclasses import dataclass
 from typing import Callable
 
 from .. import registry
@@ -49,13 +51,22 @@ def check_isolated(kind: str, name: str, *, n_pairs: int = DEFAULT_PAIRS, full: 
     """Run the kit on representation or generator `name`, each check in a worker process
     limited to `timeout_s`; a check the worker died or overran in is "failed" (or
     "xfailed", if declared) with the cause. `on_result(check, outcome, seconds)` is called
-    as each check ends."""
+    as each check ends. The plugin is imported in the workers only: one that crashes on
+    import fails the pseudo-check `load`, naming the cause."""
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, not {kind!r}")
-    checks, params = _checks(kind, name, n_pairs, full)
-    report = ConformanceReport(checks[0].spec_name if checks else name, params=params)
     job = (kind, name, n_pairs, full)
-    worker: _CheckWorker | None = None
+    worker: _CheckWorker | None = _CheckWorker(job)
+    started = time.monotonic()
+    failure = worker.start()
+    if failure is not None:
+        report = ConformanceReport(name)
+        report.outcomes["load"], report.details["load"] = "failed", failure
+        if on_result:
+            on_result("load", "failed", time.monotonic() - started)
+        return report
+    checks, spec_name, params = worker.checks, worker.spec_name, worker.params
+    report = ConformanceReport(spec_name, params=params)
     finished = False
     try:
         for i, check in enumerate(checks):
@@ -87,7 +98,15 @@ def check_isolated(kind: str, name: str, *, n_pairs: int = DEFAULT_PAIRS, full: 
     return report
 
 
-def _fail(report: ConformanceReport, check: Check, why: str) -> None:
+@dataclass(frozen=True)
+class _Listed:
+    """A check as the worker lists it: its name and declared expected failure."""
+
+    name: str
+    xfail_reason: str | None
+
+
+def _fail(report: ConformanceReport, check: _Listed, why: str) -> None:
     """Record `check` as failed (xfailed where declared) because of `why`, as the kit would."""
     report.outcomes[check.name] = "xfailed" if check.xfail_reason else "failed"
     report.details[check.name] = (f"expected: {check.xfail_reason}; " if check.xfail_reason else "") + why
@@ -101,6 +120,9 @@ class _CheckWorker:
         self.job = job
         self.process = None
         self.conn = None
+        self.checks: list[_Listed] = []  # what the worker built, in order
+        self.spec_name = job[1]
+        self.params: dict = {}
 
     def start(self) -> str | None:
         """Start the worker and have it build the checks; None, or why it could not."""
@@ -120,10 +142,12 @@ class _CheckWorker:
         except (OSError, EOFError):
             cause = self._exit_cause()
             self.stop(kill=True)
-            return f"the worker process failed to start: {cause}"
+            return f"worker died: {cause} while loading the plugin and building its checks"
         if msg[0] != "ready":
             self.stop(kill=True)
             return f"the worker process could not build the checks: {msg[1]}"
+        _, listed, self.spec_name, self.params = msg
+        self.checks = [_Listed(*c) for c in listed]
         return None
 
     def run(self, check: str, timeout_s: float) -> tuple[str | None, str | None, bool]:
@@ -174,11 +198,13 @@ def _worker_main(conn) -> None:
     _sync_environment(env, cwd)
     registry.restore(extra)
     try:
-        checks = {c.name: c for c in _checks(kind, name, n_pairs, full)[0]}
+        built, params = _checks(kind, name, n_pairs, full)
+        checks = {c.name: c for c in built}
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which fails the checks
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         return
-    conn.send(("ready",))
+    spec_name = built[0].spec_name if built else name
+    conn.send(("ready", [(c.name, c.xfail_reason) for c in built], spec_name, params))
     while True:
         try:
             check = conn.recv()

@@ -100,12 +100,18 @@ def _spec(name, cls):
 SEGFAULTS = _spec("hostile_segfault", Segfaults)
 EXITS = _spec("hostile_exit", Exits)
 HANGS = _spec("hostile_hang", Hangs)
+IMPORT_CRASH = RepresentationSpec(name="hostile_import", description="segfaults on import (test plugin)",
+                                  target="hostile_import_crash:Anything", tags=TAGS)
 '''
+
+#: A plugin module that crashes its process as it is imported.
+CRASHES_ON_IMPORT = "import ctypes\nctypes.string_at(0)\n"
 
 ENTRY_POINTS = """[brdfbench.representations]
 hostile_segfault = hostile_brdf:SEGFAULTS
 hostile_exit = hostile_brdf:EXITS
 hostile_hang = hostile_brdf:HANGS
+hostile_import = hostile_brdf:IMPORT_CRASH
 """
 
 CHECKED = ("protocol", "eval_shapes_and_dtypes", "adversarial_finite_nonnegative", "isotropy", "cost_declared")
@@ -116,6 +122,7 @@ def site(tmp_path_factory):
     """A folder holding the plugin module and a dist-info that declares its entry points."""
     root = tmp_path_factory.mktemp("site")
     (root / "hostile_brdf.py").write_text(textwrap.dedent(PLUGIN))
+    (root / "hostile_import_crash.py").write_text(CRASHES_ON_IMPORT)
     info = root / "hostile_brdf-1.0.dist-info"
     info.mkdir()
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: hostile-brdf\nVersion: 1.0\n")
@@ -154,6 +161,15 @@ def test_a_crash_exit_or_hang_fails_that_check_and_the_rest_run(site, tmp_path, 
     assert "1 failed" in out.stdout
     assert f"failed   {failing}" in out.stderr  # a progress line per check
     assert took < limit
+
+
+def test_a_plugin_that_crashes_on_import_fails_the_load_check(site, tmp_path):
+    """The command never imports the plugin's code itself: the first worker does."""
+    out, took = _check("hostile_import", site, tmp_path, "--timeout", "20")
+    assert out.returncode == 1, out.stdout + out.stderr
+    assert _lines(out.stdout) == {"load": "failed"}, out.stdout
+    assert "worker died: segmentation fault (SIGSEGV) while loading the plugin" in out.stdout
+    assert took < 120
 
 
 def test_a_healthy_builtin_passes_under_isolation(tmp_path):
