@@ -10,7 +10,7 @@ Rules (arithmetic only; memory reads are not counted):
 - bilinear in two axes: 3 per axis for the coordinates, 2 more for a circular axis's
   wrap, and three lerps per channel, so 8 + 9·C (the four corner fetches are reads).
 
-Seed 002 counts with a public PyTorch FLOP counter of its own choosing (its Table 3: 831 /
+Timonen et al. count with a public PyTorch FLOP counter of its own choosing (its Table 3: 831 /
 791 / 888 / 842); figures under these rules are ours and compare with each other, not with
 those.
 """

@@ -1,10 +1,10 @@
 """The generation harness (`harness=generation`): a generator's samples scored as a set.
 
 A generation job trains one generator on a dataset's training split and scores `draws`
-independent sample draws against the held-out test split (the reference set R), seed
-003's protocol (Table 1): per draw, MMD, COV and 1-NNA over each distance (BRDF-space L1,
+independent sample draws against the held-out test split (the reference set R), Zhou et al.'s
+protocol (Table 1): per draw, MMD, COV and 1-NNA over each distance (BRDF-space L1,
 L1-log and L1-log-cos over the full MERL grid; image-space RMSE, −PSNR and −SSIM on
-rendered spheres), FID on those renders, and the counts of seed 003's seven categories
+rendered spheres), FID on those renders, and the counts of Zhou et al.'s seven categories
 among the samples (constrained synthesis). Each draw is a set-scope cell, so the report's
 interval over draws is the variability of the sample draw itself.
 
@@ -56,7 +56,7 @@ class GenerationConfig(HarnessConfig):
     draws: int = field(default=3, metadata={"min": 1})  # independent sample draws, each scored against R
     n_samples: int | None = field(default=None, metadata={"min": 1})  # per draw; None: as many as R has
     test_fraction: float = field(default=0.1, metadata={"min_exclusive": 0})  # held out where the dataset has no split
-    categories: bool = True  # count seed 003's seven categories among the samples
+    categories: bool = True  # count Zhou et al.'s seven categories among the samples
     image_scene: str = "sphere_envmap"  # the scene spheres are rendered in for image distances and FID
     image_size: int = field(default=64, metadata={"min": 8})  # rendered width = height (pixels)
     image_spp: int = field(default=64, metadata={"min": 1})  # samples per pixel of Monte Carlo scenes
@@ -218,13 +218,13 @@ class GenerationHarness(Harness):
 
     @cached_property
     def thresholds(self):
-        """Seed 003's category thresholds, the specular ones from K-means on R's maximum reflectance."""
+        """Zhou et al.'s category thresholds, the specular ones from K-means on R's maximum reflectance."""
         from brdfbench_metrics.categories import thresholds
 
         return thresholds([merl.MerlTable.from_values(v) for v in self.reference_values])
 
     def _category_counts(self, values: list[np.ndarray]) -> list[Measurement]:
-        """How many of the draw's samples fall in each of seed 003's seven categories (they overlap)."""
+        """How many of the draw's samples fall in each of Zhou et al.'s seven categories (they overlap)."""
         from brdfbench_metrics.categories import count_categories
 
         counts = count_categories((merl.MerlTable.from_values(v) for v in values), self.thresholds)

@@ -1,4 +1,4 @@
-"""Hyperdiffusion (seed 003 §3.3, seed 000 §3.5): a diffusion model over aligned NBRDF weight vectors.
+"""Hyperdiffusion (Zhou et al. §3.3, Hu 2026 §3.5): a diffusion model over aligned NBRDF weight vectors.
 
 A transformer denoiser reads a noisy weight vector cut into tokens (one per layer, or
 contiguous chunks), with sinusoidal positional and timestep embeddings and an optional
@@ -8,7 +8,7 @@ category now; any embedding vector later, see `ConditionEncoder`) uses classifie
 guidance: training drops the condition with probability `p_uncond`, sampling combines
 ε = ε_u + w (ε_c − ε_u) with w = `guidance`.
 
-The default size is for a 2-core CPU, not seed 003's 86 M-parameter transformer: 15 chunk
+The default size is for a 2-core CPU, not Zhou et al.'s 86 M-parameter transformer: 15 chunk
 tokens of 45 weights plus the context token, d_model 128, 4 pre-norm blocks of 4 heads
 (1.0 M parameters), AdamW with batch 128, lr 5e-4 → 5e-6 (warm-up, cosine), EMA 0.999, 300
 epochs (5 700 steps on a 2 400-material NeuMERL), 50 DDIM steps. Chunks rather than layers:
@@ -65,7 +65,7 @@ from brdfbench.nbrdf.layouts import check_hidden
 from .samples import WeightSamples
 
 NAME = "hyperdiffusion"
-#: Diffusion steps and the linear β schedule of seed 003.
+#: Diffusion steps and the linear β schedule of Zhou et al..
 T = 100
 BETA_START, BETA_END = 1e-4, 2e-2
 TOKENISATIONS = ("chunk", "layer")
@@ -122,7 +122,7 @@ def ddim_step(x: Tensor, eps: Tensor, ab_t: float, ab_prev: float, eta: float = 
 
 def guided(eps_uncond: Tensor, eps_cond: Tensor, guidance: float) -> Tensor:
     """Classifier-free guidance: ε = ε_u + w (ε_c − ε_u) (w = 1: the conditional model alone;
-    seed 003's (1 + ω) ε_c − ω ε_u is w = 1 + ω)."""
+    Zhou et al.'s (1 + ω) ε_c − ω ε_u is w = 1 + ω)."""
     return eps_uncond + guidance * (eps_cond - eps_uncond)
 
 

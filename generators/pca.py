@@ -1,15 +1,15 @@
-"""PCA-A and PCA-N: the PCA baselines of seed 003's Table 1 (Sec. 4.3, A.1, B.4).
+"""PCA-A and PCA-N: the PCA baselines of Zhou et al.'s Table 1 (Sec. 4.3, A.1, B.4).
 
 Both fit a principal subspace to the training set (one observation per material) and
 sample from a Gaussian in it: coefficient j ~ N(0, λ_j), λ_j the training variance of
-component j (seed 003 A.1; Sec. 4.3's "random linear interpolation" is not specified
+component j (Zhou et al., A.1; Sec. 4.3's "random linear interpolation" is not specified
 further, so A.1's Gaussian is what is built), then mean + basis · coefficients.
 
 - `pca_brdf` (PCA-A) learns from MERL tables. A material is one vector: its three
   channels on the cells with both directions above the horizon, mapped log-relative,
   cosine-weighted (`brdfbench.logrel`) to a reference BRDF, the per-cell, per-channel
   median of the training set's valid values; invalid cells sit at the reference (x = 0).
-  k = 300 components by default (seed 003 B.4), capped at n − 1 for n materials.
+  k = 300 components by default (Zhou et al., B.4), capped at n − 1 for n materials.
 - `pca_nbrdf` (PCA-N) learns from aligned NBRDF weight vectors (675 values for
   6-21-21-3), k = 100 by default (B.4), capped at N − 1 and at the width.
 

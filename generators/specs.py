@@ -4,7 +4,7 @@ from brdfbench.specs import GeneratorSpec
 
 TRAINING_SET = GeneratorSpec(
     name="training_set",
-    description="The training split itself, sampled without replacement: the ceiling row of seed 003's Table 1",
+    description="The training split itself, sampled without replacement: the ceiling row of Zhou et al.'s Table 1",
     target="brdfbench_generators.training_set:TrainingSet",
     learns_from="tables",
     xfail_checks={"save_load_roundtrip": "it holds its training materials' names, not their tables: "
@@ -12,21 +12,21 @@ TRAINING_SET = GeneratorSpec(
 )
 PCA_BRDF = GeneratorSpec(
     name="pca_brdf",
-    description="PCA-A (seed 003): PCA of log-relative, cosine-weighted MERL tables (k = 300, capped at n - 1), "
+    description="PCA-A (Zhou et al.): PCA of log-relative, cosine-weighted MERL tables (k = 300, capped at n - 1), "
                 "Gaussian in the principal space",
     target="brdfbench_generators.pca:PCABRDF",
     learns_from="tables",
 )
 PCA_NBRDF = GeneratorSpec(
     name="pca_nbrdf",
-    description="PCA-N (seed 003): PCA of aligned NBRDF weight vectors (k = 100, capped at N - 1), "
+    description="PCA-N (Zhou et al.): PCA of aligned NBRDF weight vectors (k = 100, capped at N - 1), "
                 "Gaussian in the principal space",
     target="brdfbench_generators.pca:PCANBRDF",
     learns_from="nbrdf",
 )
 VAE_BRDF = GeneratorSpec(
     name="vae_brdf",
-    description="VAE-A (seed 003): MLP VAE (latent 300) over MERL tables downsampled to 45x45x90 through a fixed "
+    description="VAE-A (Zhou et al.): MLP VAE (latent 300) over MERL tables downsampled to 45x45x90 through a fixed "
                 "PCA reduction of the training tables, nearest upsampling",
     target="brdfbench_generators.vae:VAEBRDF",
     learns_from="tables",
@@ -34,7 +34,7 @@ VAE_BRDF = GeneratorSpec(
 )
 VAE_NBRDF = GeneratorSpec(
     name="vae_nbrdf",
-    description="VAE-N (seed 003): MLP encoder/decoder over aligned NBRDF weight vectors, latent 100",
+    description="VAE-N (Zhou et al.): MLP encoder/decoder over aligned NBRDF weight vectors, latent 100",
     target="brdfbench_generators.vae:VAENBRDF",
     learns_from="nbrdf",
     check_params={"epochs": 20},

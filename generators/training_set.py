@@ -1,4 +1,4 @@
-"""The training set scored as if it were a generator: the ceiling row of seed 003's Table 1.
+"""The training set scored as if it were a generator: the ceiling row of Zhou et al.'s Table 1.
 
 `sample(n)` returns n distinct training materials, chosen at random (seeded), as the tables
 they are. A generator that reproduces its training data scores like this row; a figure

@@ -1,4 +1,4 @@
-"""VAE-A and VAE-N: the VAE baselines of seed 003's Table 1 (Sec. 4.3, A.4, B.5).
+"""VAE-A and VAE-N: the VAE baselines of Zhou et al.'s Table 1 (Sec. 4.3, A.4, B.5).
 
 Both are Gaussian VAEs (Kingma and Welling) with MLP encoder and decoder, trained on the
 ELBO with an MSE likelihood and sampled from the standard normal prior, z ~ N(0, I).
@@ -8,8 +8,8 @@ ELBO with an MSE likelihood and sampled from the standard normal prior, z ~ N(0,
   with no variance (e.g. the first layer's weights on the always-zero input of the
   Rusinkiewicz encoding, which a shared initialisation leaves equal) are fed as 0, left
   out of the loss and decoded as their constant. 4 layers each side, hidden and latent
-  100, batch 32, lr 1e-3 (seed 003 B.5).
-- `vae_brdf` (VAE-A) learns from MERL tables downsampled to 45 × 45 × 90 (seed 003 B.5).
+  100, batch 32, lr 1e-3 (Zhou et al., B.5).
+- `vae_brdf` (VAE-A) learns from MERL tables downsampled to 45 × 45 × 90 (Zhou et al., B.5).
   Value space: x = ln(1 + ρ·cosθi·cosθo / ε), the logrel mapping relative to the zero BRDF
   (`logrel.to_mapped` with reference 0, ε = 1e-3): reference-free, ≥ 0, and, like the PCA
   space, weighing the specular peak and the diffuse floor alike. A low-resolution cell is
@@ -38,7 +38,7 @@ set's total variance (VAE-N: of the standardised coordinates; VAE-A: of the valu
 KL the posterior's divergence from the prior in nats. That is the negative ELBO (scaled)
 of a Gaussian likelihood whose noise variance in every direction is kl_weight / 2 of the
 total variance: as in probabilistic PCA, directions holding less than that are left to
-the noise. The seeds name an MSE likelihood but no weight; kl_weight = 2e-3 by default
+the noise. The source papers name an MSE likelihood but no weight; kl_weight = 2e-3 by default
 models the directions holding more than 0.1 % of the variance (99 % of it on 180
 synthetic tables). A weaker KL (2e-4) lets 180 training tables be memorised in narrow
 posteriors whose gaps the prior's samples fall into (they decode near the mean); a much

@@ -13,7 +13,7 @@ from .markdown import fmt
 INTRO = ("Each generator is trained on the dataset's training split; each of its {draws} independent sample draws "
          "is scored against the held-out test split ({ref} materials) as a set. A figure is the mean over the draws "
          "with a {conf} Student-t interval over them; in parentheses, the published figure of the same generator "
-         "(seed 000 Table 4.5), in its printed display scale (ours converted to it). ↓ lower is better, ↑ higher "
+         "(Hu 2026, Table 4.5), in its printed display scale (ours converted to it). ↓ lower is better, ↑ higher "
          "is better, 1-NNA is best at 50 %; the best generator's figure is marked. The training set's row is the "
          "ceiling: the training split scored as if it were a generator (never marked best).")
 
@@ -51,7 +51,7 @@ def markdown(s: GenerationSection) -> list[str]:
     if not s.rows:
         return lines + ["No successful results yet.", ""] + _md_failures(s)
     names = [f"`{c.label}`" for c in s.columns]
-    lines += ["### Unconditional synthesis (seed 003 Table 1)", "", _intro(s), "", f"> {s.seed_caveat}", ""]
+    lines += ["### Unconditional synthesis (Zhou et al., Table 1)", "", _intro(s), "", f"> {s.paper_caveat}", ""]
     body = []
     for row in s.rows:
         best = row.best(s.ceilings)
@@ -71,7 +71,7 @@ def markdown(s: GenerationSection) -> list[str]:
                                          *[_text(r.cells.get(c.config_hash), 1.0, False) for c in s.columns]]
                                         for r in s.costs]) + [""]
     if s.categories:
-        lines += ["### Constrained synthesis: samples per draw in each category (seed 003 C.3)", ""]
+        lines += ["### Constrained synthesis: samples per draw in each category (Zhou et al., C.3)", ""]
         lines += _table(["category", *names], [[r.label, *[_text(r.cells.get(c.config_hash), 1.0, False) for c in s.columns]]
                                                for r in s.categories]) + [""]
     return lines + _md_failures(s)
@@ -169,8 +169,8 @@ def html_section(s: GenerationSection, sid: str, results_dir: Path | None = None
         out.append(f"<blockquote>{_e(s.caveat)}</blockquote>")
     if not s.rows:
         return out + ["<p>No successful results yet.</p>", *_html_failures(s)]
-    out += ["<h3>Unconditional synthesis (seed 003 Table 1)</h3>", f'<p class="note">{_e(_intro(s))}</p>',
-            f"<blockquote>{_e(s.seed_caveat)}</blockquote>", _html_table(f"{sid}-table1", "metric", s, s.rows, True)]
+    out += ["<h3>Unconditional synthesis (Zhou et al., Table 1)</h3>", f'<p class="note">{_e(_intro(s))}</p>',
+            f"<blockquote>{_e(s.paper_caveat)}</blockquote>", _html_table(f"{sid}-table1", "metric", s, s.rows, True)]
     if s.costs:
         out += ["<h3>Cost</h3>", _html_table(f"{sid}-cost", "", s, s.costs, False, interval=False)]
     curves = training_curves(s, results_dir) if results_dir is not None else []
@@ -178,7 +178,7 @@ def html_section(s: GenerationSection, sid: str, results_dir: Path | None = None
         out += ["<h3>Training curves</h3>", '<p class="note">Each generator\'s own training objective per epoch '
                 "(not comparable across generators); dashed: held-out.</p>", f'<div class="plot">{curve_svg(curves)}</div>']
     if s.categories:
-        out += ["<h3>Constrained synthesis: samples per draw in each category (seed 003 C.3)</h3>",
+        out += ["<h3>Constrained synthesis: samples per draw in each category (Zhou et al., C.3)</h3>",
                 _html_table(f"{sid}-categories", "category", s, s.categories, False, interval=False)]
     return out + _html_failures(s)
 

@@ -1,4 +1,4 @@
-"""The generation section of a report: seed 003's Table 1, ours beside the published figures.
+"""The generation section of a report: Zhou et al.'s Table 1, ours beside the published figures.
 
 Rows are (set metric, distance) pairs in Table 1's order (FID; MMD, COV and 1-NNA over the
 BRDF-space and image-space distances), columns the configurations of generators (the
@@ -7,7 +7,7 @@ is the mean over the job's independent sample draws with a Student-t 95 % interv
 them (`distributional.draw_interval`: the variability of the sample draw). Costs (training
 and sampling time, memory, excluded samples) and the seven categories' counts follow.
 
-The published figures (seed 000 Table 4.5 = seed 003 Table 1, 120 test materials) are
+The published figures (Hu 2026, Table 4.5 = Zhou et al., Table 1, 120 test materials) are
 shown in their printed display scale ("×1e2": the figure times 100), ours converted to it.
 """
 
@@ -24,12 +24,12 @@ from .view import Failure
 
 #: Table 1's column order, by generator plugin; others follow by label.
 PLUGIN_ORDER = ("training_set", "pca_brdf", "pca_nbrdf", "vae_brdf", "vae_nbrdf", "hyperdiffusion")
-#: The paper's column for each of our generators (seed 000 Table 4.5).
+#: The paper's column for each of our generators (Hu 2026, Table 4.5).
 PAPER_MODELS = {"training_set": "training set", "pca_brdf": "PCA-A (PCA-brdf)", "pca_nbrdf": "PCA-N (PCA-mlp)",
                 "vae_brdf": "VAE-A (VAE-brdf)", "vae_nbrdf": "VAE-N (VAE-mlp)",
                 "hyperdiffusion": "hyperdiffusion (NeuMaDiff)"}
 PAPER_TABLE = "Table 4.5"
-PAPER_SOURCE = "seed 000"
+PAPER_SOURCE = "Hu 2026"  # the paper of PAPER_TABLE, as `brdfbench.citations` cites it
 DISTANCE_NAMES = {"l1": "BRDF-L1", "l1_log": "BRDF-L1-log", "l1_log_cos": "BRDF-L1-log-cos", "rmse": "RMSE",
                   "neg_psnr": "-PSNR", "neg_ssim": "-SSIM"}
 #: Display scale of the paper's MMD rows (the printed figure is the value times this).
@@ -41,7 +41,7 @@ COSTS = {"train_time": "train time (s)", "sample_time": "sample time per draw (s
          "model_bytes": "generator bytes", "non_finite_samples": "non-finite samples excluded per draw",
          "samples_scored": "samples scored per draw"}
 CONFIDENCE = 0.95
-SEED_CAVEAT = ("Published: seed 000 Table 4.5 (= seed 003 Table 1; its VAE-N column differs), scored on a "
+PAPER_CAVEAT = ("Published: Hu 2026, Table 4.5 (= Zhou et al., Table 1; its VAE-N column differs), scored on a "
                "120-material test set of AugMERL from the 100 MERL measurements, FID on 64-dim Inception features; "
                "ours on this dataset's split and renders (standard 2048-dim Inception features), so compare "
                "orderings, not values.")
@@ -102,7 +102,7 @@ class GenerationSection:
     reference_size: int | None
     draws: int
     failures: list[Failure]
-    seed_caveat: str = SEED_CAVEAT
+    paper_caveat: str = PAPER_CAVEAT
     kind: str = field(default="generation", init=False)
 
     @property
@@ -131,12 +131,14 @@ def _columns(df: pd.DataFrame) -> list[Column]:
 
 
 def _published() -> dict[tuple[str, str], float]:
-    """(paper model, paper metric) → the printed figure of seed 000 Table 4.5."""
+    """(paper model, paper metric) → the printed figure of Hu 2026, Table 4.5."""
+    from brdfbench import citations
+
     from . import published
 
     out = {}
     for p in published.figures():
-        if p.source.startswith(PAPER_SOURCE + " ") and p.table.startswith(PAPER_TABLE):
+        if citations.source(p.source) == PAPER_SOURCE and p.table.startswith(PAPER_TABLE):
             out[(p.model, p.metric)] = p.value
     return out
 

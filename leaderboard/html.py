@@ -373,7 +373,7 @@ def machine_section(machines: list) -> list[str]:
 
 
 def published_section(report: view.Report) -> list[str]:
-    """The seeds' figures beside ours (`published.compare`); says so where they cannot be read."""
+    """The source papers' figures beside ours (`published.compare`); says so where they cannot be read."""
     out = ['<h2 id="published">Published figures beside ours</h2>',
            '<p class="note">Figures as printed in the source papers, converted to our unit, beside our figure for '
            "the same model and metric, with how the setups differ. A figure within a factor of "
@@ -403,8 +403,9 @@ def published_section(report: view.Report) -> list[str]:
                                               + ("" if c.section.scene == "brdf_space" else f", {c.section.scene}"))
         cls = {"agrees": "verdict-yes", "does not reproduce": "verdict-no"}.get(c.verdict, "missing")
         label = "" if c.section is None else next((r.label for r in c.section.rows if r.cell(m.our_metric) is c.ours), "")
+        where, what = published.citation(p.source if p else m.seed, p.table if p else m.table)
         body[c.section is not None].append(
-            f'<tr><td class="label">{_e(p.source if p else m.seed)}<span class="ci">{_e(p.table if p else m.table)}'
+            f'<tr><td class="label">{_e(where)}<span class="ci">{_e(what)}'
             f'</span></td><td class="label">{_e(m.model)}</td><td class="label">{_e(m.metric)} → '
             f'<code>{_e(m.our_metric)}</code></td><td data-sort="{_number(p.value if p else None)}">{_e(theirs)}</td>'
             f'<td data-sort="{_number(c.theirs)}">{fmt(c.theirs)}</td>'

@@ -127,7 +127,7 @@ def table_section(s: TableSection) -> list[str]:
 def sharpness_caption(split: view.Split) -> str:
     named = ", ".join(f"{m} ({split.widths[m]:.3g} rad)" for m in split.sharpest)
     return (f"Means over the {len(split.sharpest)} materials whose target has the narrowest specular lobe "
-            f"and over the other {split.rest}. Width: the lobe half-width of seed 003 (C.3), the θh at which "
+            f"and over the other {split.rest}. Width: the lobe half-width of Zhou et al. (C.3), the θh at which "
             f"max over channels of f(θh, θd = 0, φd = 0) first halves, on the target's table. "
             f"The sharpest: {named}.")
 

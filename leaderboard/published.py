@@ -1,4 +1,4 @@
-"""The seeds' published figures beside ours for the same model and metric.
+"""The source papers' published figures beside ours for the same model and metric.
 
 `data/seed_figures.csv` holds every table of the four source papers as printed (with
 their sources); `data/published_matches.csv` says which of those rows measure what one of
@@ -8,14 +8,21 @@ with every report section that has our figure; a figure within a factor of two o
 published one (for dB: within 3 dB; for SSIM: 1 − SSIM within a factor of two) is said to
 agree, any other is said not to reproduce, and a match with no figure of ours is listed
 as not measured.
+
+The data key each row by an internal label of its paper; what a report shows is the
+paper's citation (`brdfbench.citations`, `citation` here), e.g. "Sztrajman et al. 2021,
+Table 2".
 """
 
 from __future__ import annotations
 
 import csv
 import math
+import re
 from dataclasses import dataclass
 from importlib import resources
+
+from brdfbench import citations
 
 from .view import Cell, Report, TableSection
 
@@ -70,6 +77,23 @@ class Comparison:
 def _rows(name: str) -> list[dict[str, str]]:
     text = resources.files("brdfbench_leaderboard").joinpath("data", name).read_text(encoding="utf-8")
     return list(csv.DictReader(text.splitlines()))
+
+
+#: Where in its paper a figure is printed: "Table 4.1 image quality ..." → ("Table 4.1", "image
+#: quality ..."); "section 3.1" and "text 4.3.2.2 efficiency" → "§3.1", "§4.3.2.2".
+_WHERE = re.compile(r"(Table|Figure|section|text)\s+(\d+(?:\.\d+)*)\s*(.*)", re.DOTALL)
+
+
+def citation(source: str, table: str) -> tuple[str, str]:
+    """(where, what): a figure's source and table as a report shows them: the paper's citation
+    and the place in it ("Sztrajman et al. 2021, Table 2"), and the table's description
+    (any internal label in it cited too)."""
+    m = _WHERE.fullmatch(table.strip())
+    if m is None:
+        return citations.source(source), citations.cite(table)
+    kind, number, rest = m.groups()
+    place = f"§{number}" if kind in ("section", "text") else f"{kind} {number}"
+    return f"{citations.source(source)}, {place}", citations.cite(rest)
 
 
 def _float(text: str | None) -> float | None:
@@ -130,7 +154,7 @@ def compare(report: Report) -> list[Comparison]:
         p = _find(m, published)
         if p is None:
             out.append(Comparison(m, None, None, None, "published figure missing",
-                                  f"{m.seed} {m.table}: no row for {m.model} / {m.metric} in {FIGURES_FILE}"))
+                                  f"{citation(m.seed, m.table)[0]}: no row for {m.model} / {m.metric} in {FIGURES_FILE}"))
             continue
         found = False
         for s in tables_:

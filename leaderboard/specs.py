@@ -13,6 +13,6 @@ MARKDOWN = ReportSpec(
 HTML = ReportSpec(
     name="html",
     description="leaderboard.html: one self-contained page: sortable tables with intervals, accuracy-against-cost "
-                "plots, convergence figures, the seeds' published figures beside ours",
+                "plots, convergence figures, the source papers' published figures beside ours",
     target="brdfbench_leaderboard.html:html_report",
 )

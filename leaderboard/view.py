@@ -128,7 +128,7 @@ class Category:
 class Split:
     """A table section's materials split by the width of their target's specular lobe: the
     sharpest tenth (at least one) against the rest, with each configuration's mean of
-    `metrics` over each part. Seed 002 claims the learned warps help most on sharp highlights."""
+    `metrics` over each part. Timonen et al. claim the learned warps help most on sharp highlights."""
 
     sharpest: tuple[str, ...]  # by ascending half-width
     widths: dict[str, float]  # material → lobe half-width (rad) of the sharpest

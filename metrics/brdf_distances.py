@@ -1,6 +1,6 @@
 """BRDF-space distances between two sets of materials over the full 90×90×180 MERL grid, as
-the distances the distributional metrics (`distributional`) are computed from (seed 003
-eq. 6 and eq. 36; seed 000 eq. 4.12 for the cosine-weighted form):
+the distances the distributional metrics (`distributional`) are computed from (Zhou et al.
+eq. 6 and eq. 36; Hu 2026 eq. 4.12 for the cosine-weighted form):
 
 - `l1`: mean |f − f'| (1/sr),
 - `l1_log`: mean |log(1 + f) − log(1 + f')|,

@@ -1,4 +1,4 @@
-"""Material categories of constrained synthesis (seed 003, Sec. 4.5, C.3, F.1; seed 000, § 3.6).
+"""Material categories of constrained synthesis (Zhou et al., Sec. 4.5, C.3, F.1; Hu 2026, § 3.6).
 
 A generation benchmark draws materials unconditionally and filters them into seven
 categories by BRDF statistics over the MERL grid: diffuse, metallic, low-, mid- and
@@ -20,8 +20,8 @@ a cell. The rules, with `Thresholds` t and `MaterialStats` s:
   of one channel, `Thresholds.channel`) in [f_diffuse, f1), [f1, f2), [f2, ∞).
 - plastic: the specular part is white: on every cell with ‖f‖∞ > f_diffuse, every pair of
   channels differs by less than δ = 5 % of max ‖f‖∞. The material must also have both a
-  specular part (some cell exceeds) and a diffuse part (not every cell exceeds), as seed
-  000 defines plastic; otherwise a Lambertian surface would pass vacuously.
+  specular part (some cell exceeds) and a diffuse part (not every cell exceeds), as
+  Hu 2026 defines plastic; otherwise a Lambertian surface would pass vacuously.
 - mirror: lobe half-width w < 0.349 rad (see `lobe_half_width`), and the lobe's peak
   ‖f(0, 0, 0)‖∞ above f_diffuse: the rule measures a specular lobe, and a row that never
   leaves the diffuse range has none (without this, a dark felt whose diffuse row halves
@@ -45,20 +45,20 @@ from brdfbench.harness.lobes import lobe_half_width, peak_row, theta_h_centres
 from brdfbench.merl import MerlTable
 from brdfbench.protocol import Material, Representation
 
-#: The seven categories, in seed 003's order.
+#: The seven categories, in Zhou et al.'s order.
 CATEGORIES = ("diffuse", "metallic", "low-specular", "mid-specular", "high-specular", "plastic", "mirror")
 
-#: Energy conservation bound of a constant BRDF (seed 003, eqs. 7–9), in 1/sr.
+#: Energy conservation bound of a constant BRDF (Zhou et al., eqs. 7–9), in 1/sr.
 F_DIFFUSE = 1.0 / math.pi
-#: Seed 000's practical threshold for MERL data ("for MERL dataset, the threshold is 1").
-F_DIFFUSE_SEED000 = 1.0
-#: e: how many cells a diffuse material may have above f_diffuse (seed 003, eq. 24).
+#: The practical threshold of Hu 2026 for MERL data ("for MERL dataset, the threshold is 1").
+F_DIFFUSE_HU2026 = 1.0
+#: e: how many cells a diffuse material may have above f_diffuse (Zhou et al., eq. 24).
 EXCEPTIONS = 80_000
-#: δ_plastic as a fraction of the maximum reflectance (seed 003, C.3).
+#: δ_plastic as a fraction of the maximum reflectance (Zhou et al., C.3).
 PLASTIC_TOLERANCE = 0.05
-#: w_mirror, radians (seed 003, C.3; seed 000, § 3.6).
+#: w_mirror, radians (Zhou et al., C.3; Hu 2026, § 3.6).
 MIRROR_WIDTH = 0.349
-#: Seed 003's specular thresholds f1, f2 (1/sr).
+#: Zhou et al.'s specular thresholds f1, f2 (1/sr).
 PUBLISHED_SPECULAR = (100.0, 600.0)
 #: Clusters of maximum reflectance: low, mid and high specular.
 N_CLUSTERS = 3
@@ -87,7 +87,7 @@ class Thresholds:
     exceptions: int = EXCEPTIONS
     plastic_tolerance: float = PLASTIC_TOLERANCE
     mirror_width: float = MIRROR_WIDTH
-    source: str = "published (seed 003, C.3)"
+    source: str = "published (Zhou et al., C.3)"
     centres: tuple[float, ...] = ()
 
     def __post_init__(self):
@@ -103,7 +103,7 @@ class Thresholds:
             raise ValueError(f"exceptions must be a non-negative integer, got {self.exceptions!r}")
 
 
-#: Seed 003's thresholds: f_diffuse = 1/π, f1 = 100, f2 = 600 (its Fig. 21 clustered the red
+#: Zhou et al.'s thresholds: f_diffuse = 1/π, f1 = 100, f2 = 600 (its Fig. 21 clustered the red
 #: channel; here they apply to ‖f‖∞, which is the same for a white specular lobe).
 PUBLISHED = Thresholds()
 
@@ -138,14 +138,14 @@ def thresholds(reference_members: Iterable, *, f_diffuse: float = F_DIFFUSE, cha
     f_diffuse is not learned: it is the energy conservation bound. A constant BRDF f in a
     channel reflects ∫ f cos θo dωo = π f of unit incident irradiance, which passivity
     caps at 1, so f ≤ 1/π: a Lambertian surface of albedo ρ ≤ 1 has f = ρ/π ≤ 1/π, and
-    more than that in a cell is specular. Seed 003 uses 1/π; seed 000 derives the same
+    more than that in a cell is specular. Zhou et al. use 1/π; Hu 2026 derives the same
     but applies 1 to MERL data ("it could be pre-multiplied by π"); brdfbench's MERL
     values are in 1/sr, not pre-multiplied, so 1/π is the default and
-    `F_DIFFUSE_SEED000` is there to reproduce seed 000.
+    `F_DIFFUSE_HU2026` is there to reproduce Hu 2026.
 
     f1 < f2 are the boundaries of 3-means (low, mid, high), in linear units as Fig. 21,
     on each member's maximum reflectance: ‖f‖∞ by default, which an RGB permutation (how
-    seed 003 augments MERL) leaves unchanged; channel="red" reproduces Fig. 21, which
+    Zhou et al. augment MERL) leaves unchanged; channel="red" reproduces Fig. 21, which
     clusters the red channel. The rules then compare the same statistic. A set of fewer
     than `MIN_KMEANS_MEMBERS` members or 3 distinct maxima gets the published f1, f2
     with a warning, and `source` says so.
@@ -159,7 +159,7 @@ def thresholds(reference_members: Iterable, *, f_diffuse: float = F_DIFFUSE, cha
         reason = (f"reference set of {n} members ({np.unique(maxima).size} distinct maxima) is too small for "
                   f"{N_CLUSTERS}-means (needs {MIN_KMEANS_MEMBERS} members, {N_CLUSTERS} distinct)")
         warnings.warn(f"{reason}: using the published specular thresholds {PUBLISHED_SPECULAR}", stacklevel=2)
-        return Thresholds(f_diffuse=f_diffuse, channel=channel, source=f"published (seed 003, C.3): {reason}")
+        return Thresholds(f_diffuse=f_diffuse, channel=channel, source=f"published (Zhou et al., C.3): {reason}")
     (f1, f2), centres = kmeans_boundaries(maxima, random_state=random_state)
     if f1 <= f_diffuse:
         warnings.warn(f"K-means boundary f1 = {f1:.4g} is not above f_diffuse = {f_diffuse:.4g}: "

@@ -1,5 +1,5 @@
 """Distributional metrics of a synthesized set S against a reference set R, from distances
-(seed 003, eqs. 3–5, after the point-cloud metrics of Achlioptas et al. 2018 and Yang et
+(Zhou et al., eqs. 3–5, after the point-cloud metrics of Achlioptas et al. 2018 and Yang et
 al. 2019):
 
 - MMD (minimum matching distance): the mean over R of the distance to the nearest member

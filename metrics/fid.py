@@ -1,5 +1,5 @@
 """Fréchet Inception Distance (Heusel et al. 2017) between two sets of rendered images, as
-seed 003 (Table 1) and seed 000 (§4.3, eq. 4.9) score generated materials:
+Zhou et al. (Table 1) and Hu 2026 (§4.3, eq. 4.9) score generated materials:
 
     FID = |μa − μb|² + tr(Σa + Σb − 2 (Σa Σb)^½)
 

@@ -1,6 +1,6 @@
 """Functional BRDF-space metrics over matched (N, 3) predictions and targets.
 
-Log metrics follow seed 000 (eq. 4.12 and section 4.4.1): L1-log = |log(1+f1) - log(1+f2)|,
+Log metrics follow Hu 2026 (eq. 4.12 and section 4.4.1): L1-log = |log(1+f1) - log(1+f2)|,
 L1-log-cos = |log(1+f1 cos θi) - log(1+f2 cos θi)|, averaged over samples and channels.
 Predictions are clamped at 0 before log1p so log of a value <= -1 cannot occur.
 """

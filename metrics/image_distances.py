@@ -1,6 +1,6 @@
 """Image-space distances between two sets of materials, as the distances the distributional
-metrics (`distributional`) are computed from (seed 003 Sec. 4.2 and supplementary D.1;
-seed 000 §4.3): each member is rendered on a sphere, and every pair of renders compared.
+metrics (`distributional`) are computed from (Zhou et al., Sec. 4.2 and supplementary D.1;
+Hu 2026 §4.3): each member is rendered on a sphere, and every pair of renders compared.
 
 - `render_set`: every member of a set rendered through the project's own render path (the
   scene plugin, the render harness's config and checks, `build_simulator`), with one
@@ -11,9 +11,9 @@ seed 000 §4.3): each member is rendered on a sphere, and every pair of renders 
   - `neg_psnr`: −PSNR in dB (capped at `image_functional.PSNR_MAX_DB`),
   - `neg_ssim`: −SSIM (Gaussian window 11, σ 1.5),
 
-  negated similarities being distances in the sense seed 003 uses (a smaller value means
+  negated similarities being distances in the sense Zhou et al. use (a smaller value means
   more alike; they can be negative). By default on tone-mapped images in [0, 1] (space
-  "ldr", `brdfbench.images.tonemap`, as seed 003 D.1 defines them). Space "hdr" compares
+  "ldr", `brdfbench.images.tonemap`, as Zhou et al. D.1 define them). Space "hdr" compares
   radiance (SSIM: log(1 + radiance)) with one data range for the whole matrix, the peak
   over both sets, so every entry is on the same scale and the matrix is symmetric (the
   per-image metrics take the target's own peak, which is not symmetric).

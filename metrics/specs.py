@@ -8,13 +8,13 @@ L1 = MetricSpec(
     rank=2,
 )
 L1_LOG = MetricSpec(
-    name="l1_log", description="Mean |log(1+f1) - log(1+f2)| over valid MERL grid cells (seed 000)",
+    name="l1_log", description="Mean |log(1+f1) - log(1+f2)| over valid MERL grid cells (Hu 2026)",
     target="brdfbench_metrics.base:L1Log", unit="log(1+1/sr)", higher_is_better=False,
     tags=frozenset({"brdf_space", "merl_grid"}),
     rank=1,
 )
 L1_LOG_COS = MetricSpec(
-    name="l1_log_cos", description="Mean |log(1+f1 cos θi) - log(1+f2 cos θi)| over valid MERL grid cells (seed 000)",
+    name="l1_log_cos", description="Mean |log(1+f1 cos θi) - log(1+f2 cos θi)| over valid MERL grid cells (Hu 2026)",
     target="brdfbench_metrics.base:L1LogCos", unit="log(1+1/sr)", higher_is_better=False,
     tags=frozenset({"brdf_space", "merl_grid"}),
     rank=0,
@@ -61,7 +61,7 @@ FLIP_HDR = _image("flip_hdr", "Mean HDR-FLIP error of linear radiance (67 pixels
 
 # Set-level metrics (domain "set": from distance matrices over one distance; "image_set":
 # from rendered images), scored by the generation harness on a generated set against a
-# reference set (seed 003, eqs. 3-5, and FID).
+# reference set (Zhou et al., eqs. 3-5, and FID).
 _SET = frozenset({"set"})
 MMD = MetricSpec(name="mmd", description="Minimum matching distance: mean over R of the distance to the nearest sample",
                  target="brdfbench_metrics.set_metrics:MMD", unit="distance", higher_is_better=False, tags=_SET, rank=20)

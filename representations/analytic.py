@@ -1,4 +1,4 @@
-"""Analytic BRDF baselines: Cook-Torrance (seed 000), GGX with height-correlated Smith,
+"""Analytic BRDF baselines: Cook-Torrance (Hu 2026), GGX with height-correlated Smith,
 and normalised Blinn-Phong. Each is f = k_d/π + k_s ⊙ lobe(ωi, ωo), RGB k_d and k_s.
 
 These are the baselines every neural model is measured against, so their terms
@@ -173,7 +173,7 @@ _COMMON_FLOPS = 12 + 1 + 4 + 6
 
 
 class CookTorrance(AnalyticBRDF):
-    """Cook-Torrance as in seed 000 (Hu, Cambridge TR, §3.1.1, eqs. 3.1-3.4).
+    """Cook-Torrance as in Hu 2026 (§3.1.1, eqs. 3.1-3.4).
 
     f = k_d/π + k_s · D·G·F / (4 cosθi cosθo) with
     D = GGX / Trowbridge-Reitz with α = roughness²;

@@ -33,7 +33,7 @@ from brdfbench.state_checks import expect_tensor
 from .merl import NEAREST_FLOPS
 
 EPSILON = logrel.EPSILON
-DEFAULT_MAX_K = 300  # Nielsen et al. (2015) and seed 000 keep 300 components
+DEFAULT_MAX_K = 300  # Nielsen et al. (2015) and Hu 2026 keep 300 components
 _CHUNK = 1 << 17
 
 

@@ -22,7 +22,7 @@ PCA = RepresentationSpec(
 )
 COOK_TORRANCE = RepresentationSpec(
     name="cook_torrance",
-    description="Cook-Torrance as seed 000: kd/pi + ks GGX(roughness^2) Schlick-GGX G (k = alpha^2/2) Schlick F(IoR); L1-log-cos fit",
+    description="Cook-Torrance as in Hu 2026: kd/pi + ks GGX(roughness^2) Schlick-GGX G (k = alpha^2/2) Schlick F(IoR); L1-log-cos fit",
     target="brdfbench_representations.analytic:CookTorrance",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
 )
@@ -47,21 +47,21 @@ NBRDF = RepresentationSpec(
 )
 NAIVE_MLP = RepresentationSpec(
     name="naive_mlp",
-    description="The same MLP budget fed (wi, wo) directly: the naive neural baseline of the triplane paper (seed 002)",
+    description="The same MLP budget fed (wi, wo) directly: the naive neural baseline of Timonen et al.",
     target="brdfbench_representations.nbrdf:NaiveMLP",
     tags=frozenset({"fittable", "neural"}),
     check_params={"epochs": 2, "n_samples": 100_000},  # the kit's quick run: a short fit
 )
 TRIPLEPLANE = RepresentationSpec(
     name="tripleplane",
-    description="Tripleplane (Xu et al. 2024, seed 002's baseline): radial h and polar d latent textures, SiLU MLP to log f",
+    description="Tripleplane (Xu et al. 2024, Timonen et al.'s baseline): radial h and polar d latent textures, SiLU MLP to log f",
     target="brdfbench_representations.triplane:Tripleplane",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "neural"}),
     check_params={"epochs": 2, "n_samples": 60_000},  # the kit's quick run: a short fit
 )
 TRIPLANE_GATED = RepresentationSpec(
     name="triplane_gated",
-    description="Triplane-gated (Timonen et al., seed 002): tripleplane with learned radial warps and latent-gated texels",
+    description="Triplane-gated (Timonen et al.): tripleplane with learned radial warps and latent-gated texels",
     target="brdfbench_representations.triplane:TriplaneGated",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "neural"}),
     check_params={"epochs": 2, "n_samples": 60_000},  # the kit's quick run: a short fit

@@ -1,4 +1,4 @@
-"""`tripleplane` (Xu et al. 2024; the baseline of seed 002): latent textures over the half and
+"""`tripleplane` (Xu et al. 2024; the baseline of Timonen et al.): latent textures over the half and
 difference vectors decoded by a small SiLU MLP to log f (the arithmetic: triplane_model.py;
 the batched fit: triplane_fit.py).
 
@@ -269,13 +269,13 @@ def _checked(tensors, shape: tm.Shape, name: str) -> dict[str, torch.Tensor]:
     return out
 
 
-#: The triplane-gated defaults (seed 002's model): tripleplane's textures and decoder plus two
+#: The triplane-gated defaults (Timonen et al.'s model): tripleplane's textures and decoder plus two
 #: warp components per texture and one latent (the uniform-material case of the gating).
 GATED_DEFAULTS = {"latent": 1, "warps": 2}
 
 
 class TriplaneGated(Tripleplane):
-    """Seed 002's model: tripleplane's textures storing C × D_s matrices that a spatial latent
+    """Timonen et al.'s model: tripleplane's textures storing C × D_s matrices that a spatial latent
     z_s gates (z_h = H z_s; one learned z_s for a spatially uniform material, the path kept
     general for spatially varying ones), each texture read at a learned radial warp
     r' = Σ_k w_k r^{α_k} (w a softmax, α_k = 1/2 + softplus, started near the identity), so

@@ -1,4 +1,4 @@
-"""The tripleplane model's arithmetic (Xu et al. 2024, as seed 002 Eq. 5 and Sec. 3 describe
+"""The tripleplane model's arithmetic (Xu et al. 2024, as Timonen et al. Eq. 5 and Sec. 3 describe
 it): latent textures over the disk-projected half and difference vectors, read with
 interpolation, their features concatenated and decoded by a small SiLU MLP to log f.
 
@@ -78,7 +78,7 @@ class Shape:
         """Per evaluation, by brdfbench.flops' rules: coordinates, the radial warps (per
         component a log-multiply-exp and a weighted add: 5, plus the log of r: 1), one linear
         and one bilinear texture read, the gating (a C × D_s matrix times z_s, skipped for
-        D_s = 1 as seed 002 skips it for uniform materials: z_s folds into the texels), the
+        D_s = 1 as Timonen et al. skip it for uniform materials: z_s folds into the texels), the
         SiLU decoder, exp and its clamp per channel."""
         c_h, c_d = self.channels
         g = max(1, self.latent)
@@ -142,12 +142,12 @@ def read_polar(pole: torch.Tensor, rings: torch.Tensor, r: torch.Tensor, phi: to
 #: r below this reads as this inside a warp's logarithm (r^α's gradient in α is r^α·ln r:
 #: finite there); r = 0 itself warps to 0.
 WARP_R_MIN = 1e-12
-#: Seed 002 bounds every warp exponent from below by 1/2 (α = 1/2 is Dupuy and Jacob's warp).
+#: Timonen et al. bound every warp exponent from below by 1/2 (α = 1/2 is Dupuy and Jacob's warp).
 WARP_ALPHA_MIN = 0.5
 
 
 def warp(r: torch.Tensor, alpha: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
-    """Seed 002 Eq. 7, r' = Σ_k w_k r^{α_k}, per material: r (B,), alpha and weight (M, K) → (M, B)."""
+    """Timonen et al. Eq. 7, r' = Σ_k w_k r^{α_k}, per material: r (B,), alpha and weight (M, K) → (M, B)."""
     log_r = torch.log(r.clamp(min=WARP_R_MIN)).to(alpha.dtype)
     powers = torch.exp(alpha[:, None, :] * log_r[None, :, None])
     powers = torch.where((r > 0)[None, :, None], powers, torch.zeros_like(powers))  # 0^α = 0 exactly

@@ -1,4 +1,4 @@
-"""AugMERL (seed 003, Sec. 3.1): a base set's RGB permutations and PCA-space interpolations.
+"""AugMERL (Zhou et al., Sec. 3.1): a base set's RGB permutations and PCA-space interpolations.
 
 From any registered base dataset of n materials:
 
@@ -20,7 +20,7 @@ From any registered base dataset of n materials:
 `size` ≤ 6n keeps a seeded subset of the permuted materials (no PCA at all); a larger size
 keeps all 6n and adds size − 6n mixes. `splits` holds a seeded `test_fraction` out
 (`brdfbench.generator_protocol.seeded_split`); a test material's parents or siblings may
-be in training, as in seed 003.
+be in training, as in Zhou et al..
 
 The PCA state (reference, pooled mean, centred base channel vectors, validity,
 eigenvectors) is computed on the first mix loaded, kept under

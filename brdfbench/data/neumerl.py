@@ -1,10 +1,10 @@
-"""NeuMERL (seed 003, Sec. 3.2): AugMERL plus an aligned NBRDF weight vector per material.
+"""NeuMERL (Zhou et al., Sec. 3.2): AugMERL plus an aligned NBRDF weight vector per material.
 
 The tables, names, categories and splits are AugMERL's (`brdfbench.data.augmerl`); the
 dataset adds `weights(names) -> WeightSet`: each material's 6-21-21-3 NBRDF (hidden sizes
 configurable) flattened as `brdfbench.nbrdf.layouts.flatten` orders it (675 values).
 
-Alignment (seed 003's weight initialisation): the anchor, the first material of the
+Alignment (Zhou et al.'s weight initialisation): the anchor, the first material of the
 train split, is fitted from its own random initialisation; every other material starts
 from the anchor's fitted network, so the vectors of different materials stay close and
 their hidden units correspond. Fits go through the registered `nbrdf` representation's

@@ -24,17 +24,17 @@ NBRDF_RELEASE = DatasetSpec(
 )
 AUGMERL = DatasetSpec(
     name="augmerl",
-    description="AugMERL (seed 003): a base set's RGB permutations (x6) and PCA-space interpolations of pairs, with a held-out test split",
+    description="AugMERL (Zhou et al.): a base set's RGB permutations (x6) and PCA-space interpolations of pairs, with a held-out test split",
     target="brdfbench.data.augmerl:augmerl_dataset",
     caveat=(
         "AugMERL materials are channel permutations and PCA-space interpolations of the base set's materials; "
         "test materials are held out at random, so a test material's parents or permutations may be in the "
-        "training split (as in seed 003)."
+        "training split (as in Zhou et al.)."
     ),
 )
 NEUMERL = DatasetSpec(
     name="neumerl",
-    description="NeuMERL (seed 003): AugMERL plus an aligned NBRDF weight vector per material (batched fits, init=shared, cached)",
+    description="NeuMERL (Zhou et al.): AugMERL plus an aligned NBRDF weight vector per material (batched fits, init=shared, cached)",
     target="brdfbench.data.neumerl:neumerl_dataset",
     caveat=(
         "NeuMERL's tables are AugMERL's; its NBRDF weight vectors are fits to them (shared initialisation), "

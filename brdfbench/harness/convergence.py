@@ -4,7 +4,7 @@ For one fitted model and material, render the scene at every spp of a ladder (de
 1, 2, 4, …, 64) and compare each image with a render of the SAME model at
 `reference_spp` (default 1024). Both sides evaluate the same representation, so the error
 is Monte Carlo noise only, not representation error: it measures how well the importance
-sampler suits that representation (seed 001's error-vs-spp plots).
+sampler suits that representation (Sztrajman et al. 2021's error-vs-spp plots).
 
 Every render draws its own random numbers (a seed derived from the base seed per rung
 and for the reference), so rung errors are independent samples and not correlated

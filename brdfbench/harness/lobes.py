@@ -1,8 +1,8 @@
 """In-plane lobe slices: a BRDF at fixed incident inclinations against the outgoing angle
-in the plane of incidence, as the polar plots of BRDF Explorer and seed 001 (Figure 8)
+in the plane of incidence, as the polar plots of BRDF Explorer and Sztrajman et al. 2021 (Figure 8)
 draw them. A cell of the accuracy harness saves its model's slices beside its table's
 (nearest-cell lookup, as the reference reader), for the report to plot. And the width
-of a target's specular lobe (seed 003's lobe half-width), by which the report sets the
+of a target's specular lobe (Zhou et al.'s lobe half-width), by which the report sets the
 sharpest tenth of a dataset's materials apart.
 
 Signed outgoing angle: positive on the mirror side (φo = φi + π), negative on the side of
@@ -98,8 +98,8 @@ def lobe_half_width(theta_h, values) -> float:
     channel: the same norm as the other rules, and free of channel scales (luminance would
     weigh a coloured lobe by its colour). The peak is the first valid sample (the first
     MERL θh centre is 5e-5 rad). w is interpolated linearly in θh between the last sample
-    above half and the first at or below it. The first crossing, as seed 003 (C.3) words
-    it, not seed 000's "and remains smaller thereafter": f rises again at grazing
+    above half and the first at or below it. The first crossing, as Zhou et al. (C.3) word
+    it, not Hu 2026's "and remains smaller thereafter": f rises again at grazing
     backscatter (θh → 90° with θi = θo) in measured and physically based data alike (the
     synthetic gold climbs back above half its peak at θh = 89°), which would make every
     such lobe infinitely wide. inf when f never drops to half (a flat, diffuse row); NaN

@@ -1,4 +1,4 @@
-"""The six importance samplers of seed 000 (Hu 2026, Table 3.1, Appendix A), and GGX VNDF.
+"""The six importance samplers of Hu 2026 (Table 3.1, Appendix A), and GGX VNDF.
 
 Hemisphere samplers draw ωo about the normal, independently of ωi: `uniform`, `cosine`,
 `power_cosine`. Microfacet samplers draw the half vector h about the normal with density

@@ -5,7 +5,7 @@
 - `test_training_epoch`: one training epoch (a fit with epochs=1: standardisation, the
   matched prior's SVD and ⌈2400 / batch_size⌉ steps) on 2400 × 675 weight vectors;
   `extra_info` extrapolates the default fit (its epochs × the median epoch);
-- `test_sample_120`: 120 samples with the default DDIM steps (the test-set size of seed 003);
+- `test_sample_120`: 120 samples with the default DDIM steps (the test-set size of Zhou et al.);
 - `test_sample_120_guided`: the same, category-conditioned with guidance 2 (two denoiser
   passes per step).
 

@@ -137,10 +137,10 @@ def test_the_cli_runs_a_generation_sweep_and_reports_it(tmp_path, cli):
                  "harness.distances=[l1]", "harness.metrics=[mmd,cov,one_nna]", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     text = (tmp_path / "results" / "leaderboard.md").read_text()
-    assert "generators" in text and "Unconditional synthesis (seed 003 Table 1)" in text
+    assert "generators" in text and "Unconditional synthesis (Zhou et al., Table 1)" in text
     assert "MMD BRDF-L1 (×0.001)" in text and "(2.51)" in text  # the published training-set figure beside ours
     page = (tmp_path / "results" / "leaderboard.html").read_text()
-    assert "seed 003 Table 1" in page
+    assert "Zhou et al., Table 1" in page
     bad = cli("harness=generation", "dataset=synthetic", "dataset.params.size=small", "generator=nosuch", cwd=tmp_path)
     assert bad.returncode == 2 and "generator='nosuch': no such generator config" in bad.stderr
     assert "training_set" in bad.stderr

@@ -1,4 +1,4 @@
-"""Constrained-synthesis categories (seed 003, C.3): statistics, thresholds and rules on
+"""Constrained-synthesis categories (Zhou et al., C.3): statistics, thresholds and rules on
 tables with known answers, a fitted representation, and a few synthetic materials."""
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ BROAD_COLOURED = dict(base=(0.1, 0.3, 0.5), lobe=(1.0, 0.4, 0.1), peak=50.0, sig
 # --------------------------------------------------------------------------- rules on known tables
 
 
-def test_categories_are_seed_003s_seven_in_order():
+def test_categories_are_zhou_et_als_seven_in_order():
     assert C.CATEGORIES == ("diffuse", "metallic", "low-specular", "mid-specular", "high-specular", "plastic", "mirror")
 
 
@@ -182,7 +182,7 @@ def test_thresholds_validate():
 
 
 def test_channel_picks_the_statistic_of_the_specular_ranges():
-    """A blue lobe: ‖f‖∞ puts it high, the red channel (seed 003, Fig. 21) low."""
+    """A blue lobe: ‖f‖∞ puts it high, the red channel (Zhou et al., Fig. 21) low."""
     s = C.statistics(_table(base=(0.2, 0.2, 0.2), lobe=(0.05, 0.1, 1.0), peak=1000.0, sigma=0.05))
     assert s.max_of("blue") == s.max_norm > 1000 > 100 > s.max_of("red") > 50
     assert "high-specular" in C.classify(s, C.Thresholds(channel="max"))

@@ -1,5 +1,5 @@
 """Distributional metrics (MMD, COV, 1-NNA) and the BRDF-space distance matrices they use:
-against a slow reference written from seed 003's equations 3–5, the validity properties
+against a slow reference written from Zhou et al.'s equations 3–5, the validity properties
 the issue lists, bootstrap intervals, and bad input."""
 
 from __future__ import annotations

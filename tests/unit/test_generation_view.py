@@ -57,7 +57,7 @@ def test_columns_follow_table_1_and_figures_are_means_over_draws_with_t_interval
 def test_published_figures_sit_beside_ours_in_the_paper_display_scale(section):
     mmd = next(r for r in section.rows if r.metric == "mmd" and r.distance == "l1")
     assert mmd.label == "MMD BRDF-L1 (×0.001)" and mmd.scale == 1e-3
-    assert mmd.published == {"h_train": 2.51, "h_pcan": 9.22, "h_hyper": 4.02}  # seed 000 Table 4.5
+    assert mmd.published == {"h_train": 2.51, "h_pcan": 9.22, "h_hyper": 4.02}  # Hu 2026, Table 4.5
     cov = next(r for r in section.rows if r.metric == "cov")
     assert cov.published["h_hyper"] == 50.0 and cov.scale == 1.0
 

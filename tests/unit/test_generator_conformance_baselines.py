@@ -1,4 +1,4 @@
-"""The generator conformance kit applied to the four baselines of seed 003's Table 1
+"""The generator conformance kit applied to the four baselines of Zhou et al.'s Table 1
 (PCA-A, PCA-N, VAE-A, VAE-N), each with its spec's quick check_params."""
 
 import pytest

@@ -62,7 +62,7 @@ def test_alpha_bars_are_the_running_products():
     expected = [math.prod(1 - float(b) for b in betas[: t + 1]) for t in range(100)]
     assert torch.allclose(ab, torch.tensor(expected, dtype=torch.float64), rtol=1e-12)
     assert float(ab[0]) == pytest.approx(1 - 1e-4)
-    # the terminal ᾱ of seed 003's schedule is far from 0: why the matched prior exists
+    # the terminal ᾱ of Zhou et al.'s schedule is far from 0: why the matched prior exists
     assert float(ab[-1]) == pytest.approx(0.36356, abs=1e-5)
 
 
@@ -202,7 +202,7 @@ def test_guidance_combines_eps_u_plus_w_times_the_difference():
     assert torch.equal(hd.guided(eu, ec, 0.0), eu)
     assert torch.allclose(hd.guided(eu, ec, 1.0), ec)
     assert torch.allclose(hd.guided(eu, ec, 3.0), eu + 3.0 * (ec - eu))
-    omega = 2.0  # seed 003's Algorithm 1 form (1 + ω) ε_c − ω ε_u is w = 1 + ω
+    omega = 2.0  # Zhou et al.'s Algorithm 1 form (1 + ω) ε_c − ω ε_u is w = 1 + ω
     assert torch.allclose(hd.guided(eu, ec, 1 + omega), (1 + omega) * ec - omega * eu, atol=1e-6)
 
 

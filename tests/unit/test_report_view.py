@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
+from brdfbench import citations
 from brdfbench_leaderboard import html, lobe_svg, markdown, pareto, published, view
 
 ALPHA = 0.01  # significance level of the statistical checks here
@@ -125,7 +126,9 @@ def test_every_match_names_a_published_row_with_its_source():
     for m in published.matches():
         p = published._find(m, figures)
         assert p is not None, m
-        assert p.source.startswith("seed 00")
+        assert p.source.startswith("seed 00")  # the data's key; a report shows the citation
+        where, _ = published.citation(p.source, p.table)
+        assert where.split(",")[0] in {c.short for c in citations.PAPERS.values()}, where
 
 
 def test_published_figures_beside_ours_say_whether_they_reproduce():
@@ -133,11 +136,12 @@ def test_published_figures_beside_ours_say_whether_they_reproduce():
     df = pd.concat([df, df[df.metric == "l1_log_cos"].assign(metric="hdr_rmse", value=0.65, unit="1/sr")])
     report = view.build(df, "s")
     rows = {(c.match.table, c.match.metric): c for c in published.compare(report) if c.match.representation == "nbrdf"}
-    assert rows[("Table 4", "RMSE-HDR")].verdict == "agrees"  # 0.65 beside seed 002's 0.6534
+    assert rows[("Table 4", "RMSE-HDR")].verdict == "agrees"  # 0.65 beside Timonen et al.'s 0.6534
     assert rows[("Table 3", "total memory")].verdict == "agrees"  # 2700 B beside 2.25 kB
     assert rows[("Table 4.1", "PSNR")].verdict == "not measured"  # no rendered section here
     page = html.render(df, "s")
-    assert "seed 002 (Timonen, Kemppinen, Lehtinen)" in page and "agrees" in page
+    assert "Timonen et al., Table 4" in page and "agrees" in page
+    assert not citations.LABEL.search(page)  # the papers by author, never by internal label
     # the recipe behind each of our figures: the configuration is named, and the section says
     # which configurations train on the papers' own recipes
     assert "<code>triplane_gated_paper</code>" in page and "papers' own recipes" in page

@@ -1,5 +1,5 @@
 """Importance samplers: the conformance kit on every registered sampler, property tests,
-and proof that the χ² check catches the slips of seed 000 (a missing reflection Jacobian,
+and proof that the χ² check catches the slips of Hu 2026 (a missing reflection Jacobian,
 a Beckmann NDF without its 1/π) and a cancellation that only fp32 shows."""
 
 from __future__ import annotations
@@ -188,14 +188,14 @@ def _half(wi, wo):
 
 
 class NoJacobianGGX(GGX):
-    """Seed 000's microfacet pdf: D(h) cos θh, without 1/(4 |ωo·h|)."""
+    """Hu 2026's microfacet pdf: D(h) cos θh, without 1/(4 |ωo·h|)."""
 
     def _pdf(self, wi, wo):
         return self._d_cos(_half(wi, wo))
 
 
 class BeckmannWithoutPi(Beckmann):
-    """Seed 000's Beckmann NDF, without its 1/π."""
+    """Hu 2026's Beckmann NDF, without its 1/π."""
 
     def _d_cos(self, h):
         return math.pi * super()._d_cos(h)

@@ -106,7 +106,7 @@ def test_flops_follow_the_project_counter_and_the_default_is_equal_flop():
     want = (tm.COORD_FLOPS + flops.linear_read(c_h) + flops.bilinear_read(c_d)
             + flops.mlp([c_h + c_d, 16, 3], "silu") + 6)
     assert model.flops_per_eval == want
-    assert 800 <= model.flops_per_eval <= 900  # seed 002 Table 3's band
+    assert 800 <= model.flops_per_eval <= 900  # Timonen et al., Table 3's band
     assert model.nbytes == 4 * (64 * 8 + 8 * (1 + 31 * 32) + (16 * 16 + 16) + (16 * 3 + 3))
 
 
