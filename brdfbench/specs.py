@@ -50,9 +50,20 @@ class RepresentationSpec(PluginSpec):
     #: constructor arguments of the conformance kit's quick run (e.g. a short training recipe),
     #: so that it fits in seconds; the kit's full run uses the representation's defaults.
     check_params: Mapping[str, Any] = field(default_factory=dict)
+    #: the parameters under which this representation is the target itself (an oracle, e.g.
+    #: a table read back cell by cell): reports show such a configuration apart, never ranked;
+    #: a key a configuration leaves out takes the value given here. None: never the target.
+    reference: Mapping[str, Any] | None = None
 
     def create(self, **params: Any):
         return self.load()(**params)
+
+    def is_reference(self, params: Mapping[str, Any] | None) -> bool:
+        """Whether a configuration with these constructor parameters is the target itself."""
+        if self.reference is None:
+            return False
+        params = params or {}
+        return all(params.get(k, v) == v for k, v in self.reference.items())
 
 
 @dataclass(frozen=True)

@@ -161,6 +161,19 @@ def metric_rank(name: str) -> int | None:
         return None
 
 
+def is_reference(plugin: str, params: dict[str, Any] | None) -> bool:
+    """Whether a stored configuration is its representation's reference (the target itself,
+    `RepresentationSpec.reference`); False for a plugin no longer installed."""
+    from brdfbench import registry
+
+    try:
+        spec = registry.get("representations", plugin)
+    except Exception:
+        return False
+    inner = (params or {}).get("params")
+    return bool(getattr(spec, "is_reference", None)) and spec.is_reference(inner if isinstance(inner, dict) else {})
+
+
 def dataset_caveat(name: str) -> str:
     """What the dataset plugin says its figures do not show (`DatasetSpec.caveat`), or ""."""
     from brdfbench import registry

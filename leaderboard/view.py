@@ -110,6 +110,9 @@ class Row:
     params: dict[str, Any] | None
     rank: int | None
     cells: dict[str, Cell]
+    #: the target itself (`RepresentationSpec.reference`): shown above the ranking, never
+    #: ranked, never best, off the cost plots' axes by default
+    reference: bool = False
 
     def cell(self, metric: str) -> Cell | None:
         return self.cells.get(metric)
@@ -188,10 +191,15 @@ class TableSection:
         return sorted({c.accelerator for r in self.rows for name, c in r.cells.items()
                        if self.metrics[name].timed and c.accelerator})
 
+    @property
+    def references(self) -> list[Row]:
+        """The configurations that are the target itself (shown apart, never ranked)."""
+        return [r for r in self.rows if r.reference]
+
     def timing_peers(self, metric: str) -> list[Row]:
-        """The rows whose figure of a timed metric compares with the best CPU one: where a
-        column mixes GPU and CPU timings, only the CPU ones (GPU cells are marked, never ranked)."""
-        rows = self.ranking(metric)
+        """The rows a metric's best is chosen among: never a reference; for a timed metric
+        whose column mixes GPU and CPU timings, only the CPU ones (GPU cells are marked)."""
+        rows = [r for r in self.ranking(metric) if not r.reference]
         if not self.metrics[metric].timed:
             return rows
         on_cpu = [r for r in rows if r.cell(metric) is None or not r.cell(metric).accelerator]
@@ -324,11 +332,14 @@ def shown(cell: Cell | None) -> float | None:
 
 
 def _ranked(rows: list[Row], metric: str, higher_is_better: bool) -> list[Row]:
+    """References first (never ranked), then complete figures better first, then the rest."""
     def key(row: Row):
         c = row.cells.get(metric)
+        if row.reference:
+            return (0, 0.0, row.label)
         if c is None or not c.complete:
-            return (1, 0.0, row.label)
-        return (0, -c.value if higher_is_better else c.value, row.label)
+            return (2, 0.0, row.label)
+        return (1, -c.value if higher_is_better else c.value, row.label)
 
     return sorted(rows, key=key)
 
@@ -373,8 +384,10 @@ def table_section(key: tuple[str, str, str, str], df: pd.DataFrame, widths: dict
             contended = bool((got["concurrent_jobs"] > 1).any())
             gpus = sorted({tables.accelerator(d) for d in got.get("device_detail", pd.Series(["cpu"]))} - {""})
             cells[metric.name] = _cell(values, metric, len(materials), contended, " and ".join(gpus))
-        rows.append(Row(conf.config_hash, conf.representation, getattr(conf, "plugin", "") or "",
-                        tables._params(conf.params), None, cells))
+        params = tables._params(conf.params)
+        plugin = getattr(conf, "plugin", "") or ""
+        rows.append(Row(conf.config_hash, conf.representation, plugin, params, None, cells,
+                        tables.is_reference(plugin, params)))
     primary = accuracy[0] if accuracy else None
     if primary is not None:
         ordered = _ranked(rows, primary.name, primary.higher_is_better)
@@ -382,7 +395,7 @@ def table_section(key: tuple[str, str, str, str], df: pd.DataFrame, widths: dict
         ranked = []
         for row in ordered:
             c = row.cells.get(primary.name)
-            if c is not None and c.complete:
+            if c is not None and c.complete and not row.reference:
                 rank += 1
                 ranked.append(Row(**{**row.__dict__, "rank": rank}))
             else:

@@ -7,6 +7,7 @@ MERL = RepresentationSpec(
     description="Tabulated MERL ground truth, 90x90x180 cells (nearest-cell as the reference reader, or trilinear)",
     target="brdfbench_representations.merl:TabulatedMERL",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "tabulated"}),
+    reference={"mode": "nearest", "downsample": 1},
 )
 LAMBERT = RepresentationSpec(
     name="lambert",

@@ -1,0 +1,73 @@
+"""Small pieces every HTML renderer of the report shares: escaping, sortable numbers, cells
+of the view's tables, header cells, inline SVG of a matplotlib figure."""
+
+from __future__ import annotations
+
+import html
+import io
+from importlib import resources
+
+from .markdown import fmt
+from .view import Cell, Metric
+
+CONTENDED = "†"
+ON_GPU = "‡"
+
+
+def esc(text) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def asset(name: str) -> str:
+    return resources.files("brdfbench_leaderboard").joinpath("assets", name).read_text(encoding="utf-8")
+
+
+def assets(suffix: str) -> str:
+    """Every stylesheet (".css") or script (".js") of the page, `report.*` first: each part
+    of the report keeps its own file, and the page inlines them all."""
+    folder = resources.files("brdfbench_leaderboard").joinpath("assets")
+    names = sorted((p.name for p in folder.iterdir() if p.name.endswith(suffix)),
+                   key=lambda n: (not n.startswith("report."), n))
+    return "\n".join(asset(n) for n in names)
+
+
+def svg(fig, salt: str) -> str:
+    """A figure as inline SVG markup; `salt` keeps its internal ids apart from other figures'."""
+    import matplotlib
+
+    buf = io.StringIO()
+    with matplotlib.rc_context({"svg.hashsalt": salt, "svg.fonttype": "none"}):
+        fig.savefig(buf, format="svg")
+    text = buf.getvalue()
+    return text[text.index("<svg"):]
+
+
+def number(value: float | None) -> str:
+    return "" if value is None else repr(float(value))
+
+
+def cell(c: Cell | None, metric: Metric, best: bool = False) -> str:
+    if c is None:
+        return '<td class="missing" data-sort="" title="no figure">–</td>'
+    mark = (CONTENDED if metric.timed and c.contended else "") + (ON_GPU if metric.timed and c.accelerator else "")
+    detail = f"median {fmt(c.median)}, worst {fmt(c.worst)}, {c.n}/{c.expected} materials"
+    if metric.timed and c.accelerator:
+        detail += f"; measured on a GPU ({c.accelerator})"
+    if not c.complete:
+        partial = f"partial {metric.aggregate} {fmt(c.partial)} over {c.n}/{c.expected} materials"
+        return (f'<td class="missing" data-sort="" title="{esc(partial)}">–'
+                f'<span class="ci">{c.missing} missing</span></td>')
+    ci = f'<span class="ci">[{fmt(c.lo)}, {fmt(c.hi)}]</span>' if c.lo is not None else ""
+    cls = ' class="best"' if best else ""
+    return f'<td{cls} data-sort="{number(c.value)}" title="{esc(detail)}">{esc(fmt(c.value) + mark)}{ci}</td>'
+
+
+def span(text: str) -> str:
+    return f'<span class="ci">{esc(text)}</span>' if text else ""
+
+
+def th(text: str, title: str = "", cls: str = "") -> str:
+    attrs = (f' class="{cls}"' if cls else "") + (f' title="{esc(title)}"' if title else "")
+    return f"<th{attrs}>{esc(text)}</th>"
+
+
