@@ -71,3 +71,10 @@ def th(text: str, title: str = "", cls: str = "") -> str:
     return f"<th{attrs}>{esc(text)}</th>"
 
 
+
+
+def anchor(sid: str, kind: str, material: str) -> str:
+    """The id of one material's figure of a kind ("lobe", "render") in section `sid`: the
+    per-material heat map links to it."""
+    slug = "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in material)
+    return f"{sid}-{kind}-{slug}"
