@@ -222,7 +222,8 @@ class ResultsStore(Store):
                " COALESCE(c.harness, '') AS harness, COALESCE(c.params, 'null') AS params,"
                " COALESCE(e.host, '') AS host, COALESCE(e.cpu_model, '') AS cpu_model,"
                " COALESCE(e.cpu_count, 0) AS cpu_count, COALESCE(e.threads, 0) AS threads,"
-               " COALESCE(e.launcher, '') AS launcher, COALESCE(e.device, 'cpu') AS device,"
+               " COALESCE(e.launcher, '') AS launcher, COALESCE(e.platform, '') AS platform,"
+               " COALESCE(e.device, 'cpu') AS device,"
                " COALESCE(e.device_detail, 'cpu') AS device_detail"
                " FROM results r LEFT JOIN configs c ON c.config_hash = r.config_hash"
                " LEFT JOIN environments e ON e.env_id = r.env_id" + (f" WHERE {clause}" if clause else ""))

@@ -11,12 +11,17 @@ from pathlib import Path
 
 import pandas as pd
 
-from . import chart_html, figures_html, generation_render, published_render, view
+from . import chart_html, drilldown, drilldown_html, figures_html, generation_render, main_table, published_render, view
 from . import plots as plots_module
-from .html_parts import CONTENDED, ON_GPU, assets, esc, number, span, svg, th
+from .html_parts import CONTENDED, ON_GPU, anchor, assets, esc, number, svg, th
 from .html_parts import cell as _cell
 from .markdown import fmt, sharpness_caption
 from .view import ConvergenceSection, Metric, TableSection
+
+
+#: Where a table section's heat map goes: filled in once the whole page, and so every
+#: figure a heat-map cell may link to, is known.
+DRILLDOWN_MARK = "<!--drilldown:{sid}-->"
 
 
 def _best(section: TableSection, metric: Metric) -> str | None:
@@ -27,19 +32,6 @@ def _best(section: TableSection, metric: Metric) -> str | None:
     peers = [r for r in section.timing_peers(metric.name)
              if r.cell(metric.name) is not None and r.cell(metric.name).complete]
     return peers[0].config_hash if len(peers) >= 2 else None
-
-
-def _header(metric: Metric) -> str:
-    title = f"{metric.name}: {metric.unit or 'unitless'}"
-    if metric.directed:
-        title += f", {'higher' if metric.higher_is_better else 'lower'} is better"
-    if metric.kind == "accuracy":
-        title += f"; mean over materials, {view.CONFIDENCE:.0%} bootstrap interval below"
-    else:
-        title += f"; {metric.aggregate} over materials"
-    unit = "" if metric.kind == "cost" and "(" in metric.label else (metric.unit or "unitless")
-    attrs = f' title="{esc(title)}"'
-    return f"<th{attrs}>{esc(f'{metric.label} {metric.arrow}'.rstrip())}{span(unit)}</th>"
 
 
 def table_section(s: TableSection, sid: str, results_dir: Path | None = None) -> list[str]:
@@ -55,28 +47,20 @@ def table_section(s: TableSection, sid: str, results_dir: Path | None = None) ->
         out.append(f"<blockquote>{esc(s.caveat)}</blockquote>")
     if s.primary is None:
         return out + ["<p>No successful results yet.</p>", *_failures(s.failures)]
-    metrics = [*s.accuracy, *s.costs]
-    best = {m.name: _best(s, m) for m in metrics}
-    head = [th("rank"), th("representation", cls="label"), *[_header(m) for m in metrics],
-            th("materials", f"materials with a {s.primary.name} figure")]
-    body = []
-    for row in s.rows:
-        primary = row.cell(s.primary.name)
-        cells = [f'<td data-sort="{row.rank if row.rank is not None else ""}">'
-                 f'{row.rank if row.rank is not None else "–"}</td>',
-                 f'<td class="label"><code>{esc(row.label)}</code></td>']
-        cells += [_cell(row.cell(m.name), m, best[m.name] == row.config_hash) for m in metrics]
-        cells.append(f"<td>{primary.n if primary else 0}/{len(s.materials)}</td>")
-        body.append(f"<tr>{''.join(cells)}</tr>")
-    out += ["<h3>Accuracy and its cost</h3>",
+    best = {m.name: _best(s, m) for m in [*s.accuracy, *s.costs]}
+    hidden = main_table.columns(s)[1]
+    out += ["<h3>Accuracy and its cost</h3>", *main_table.table(s, sid, best),
             f'<p class="note">Ranked by mean <code>{esc(s.primary.name)}</code> over materials; below each mean its '
-            f"{view.CONFIDENCE:.0%} bootstrap interval over materials ({view.BOOTSTRAP_RESAMPLES} resamples). Fit time "
-            "is the mean per material (amortised over the materials fitted together, for batched fitters); evals/s "
-            "and bytes the median. A configuration without a figure for every material has no mean (its partial "
-            "one is in the cell's tooltip) and is not ranked. Click a header to sort; hover a cell for median and "
-            "worst case.</p>",
-            f'<div class="scroll"><table class="sortable" id="{sid}-table"><thead><tr>{"".join(head)}</tr></thead>'
-            f"<tbody>{''.join(body)}</tbody></table></div>"]
+            f"{view.CONFIDENCE:.0%} bootstrap interval over materials ({view.BOOTSTRAP_RESAMPLES} resamples; none with "
+            f"fewer than {view.MIN_INTERVAL_N} materials). Fit time is the mean per material (amortised over the "
+            "materials fitted together, for batched fitters); evals/s and bytes the median; bytes per material "
+            "leave out a part shared by every material, shown below them. A configuration without a figure for "
+            "every material has no mean (its partial one is in the cell's tooltip) and is not ranked"
+            + ("; the reference row, the target scored against itself, is shown above the ranking and never "
+               "ranked" if s.references else "")
+            + ". Click a header to sort (▲ / ▼ mark the sorted column); hover a cell for the exact figure, median "
+            "and worst case"
+            + ("; tick the box to show every column" if hidden else "") + ".</p>"]
     if s.contended:
         out.append(f'<p class="note">{CONTENDED} measured while other brdfbench jobs ran on the same host: timings '
                    "are not comparable with unmarked ones.</p>")
@@ -93,6 +77,7 @@ def table_section(s: TableSection, sid: str, results_dir: Path | None = None) ->
         out += figures_html.lobes(s, sid, results_dir)
     if results_dir is not None and s.scene != "brdf_space":
         out += figures_html.images(s, sid, results_dir)
+    out.append(DRILLDOWN_MARK.format(sid=sid))
     out += _per_metric(s, sid)
     out += _categories(s, sid)
     out += _sharpness(s, sid)
@@ -203,15 +188,15 @@ def render_view(report: view.Report, convergence_svgs: dict[str, str] | None = N
     """The page; `convergence_svgs` maps a convergence figure's name to its SVG; `extra` is
     markup appended after the sections (e.g. the published figures)."""
     convergence_svgs = dict(convergence_svgs or {})
-    body = ["<h1>brdfbench leaderboard</h1>",
-            f'<p class="meta">Generated {esc(report.generated)} from <code>{esc(report.source)}</code>.']
+    body = ["<h1>brdfbench leaderboard</h1>"]
     if report.empty:
-        body += ["</p>", "<p>The results store is empty: run the benchmark first.</p>"]
+        body += [f'<p class="meta">Generated {esc(report.generated)} from <code>{esc(report.source)}</code>.</p>',
+                 "<p>The results store is empty: run the benchmark first.</p>"]
     else:
-        body[-1] += (f" brdfbench {esc(', '.join(report.versions))}; git {esc(', '.join(report.git_shas))}. "
-                     "Timings are from the machine that ran each cell.</p>")
+        body += provenance(report)
         toc = "".join(f'<li><a href="#s{i}">{esc(_section_title(s))}</a></li>' for i, s in enumerate(report.sections))
         body.append(f"<nav><ul>{toc}</ul></nav>")
+        drills: dict[str, drilldown.Drilldown] = {}
         for i, s in enumerate(report.sections):
             sid = f"s{i}"
             if isinstance(s, ConvergenceSection):
@@ -221,12 +206,67 @@ def render_view(report: view.Report, convergence_svgs: dict[str, str] | None = N
                 body += generation_render.html_section(s, sid, results_dir)
             else:
                 body += table_section(s, sid, results_dir)
+                d = drilldown.build(s) if s.primary is not None else None
+                if d is not None:
+                    drills[sid] = d
+        body = _fill_drilldowns(body, report, drills)
         body += machine_section(report.machines)
     body += extra or []
     return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
             f"<title>brdfbench leaderboard</title><style>{assets('.css')}</style></head>"
             f"<body>{''.join(body)}<script>{assets('.js')}</script></body></html>\n")
+
+
+def provenance(report: view.Report) -> list[str]:
+    """Where the figures come from: the store, the code, and every machine that measured them."""
+    code = f"brdfbench {esc(', '.join(report.versions))} (git {esc(', '.join(report.git_shas))})"
+    items = [f"<dt>Store</dt><dd><code>{esc(report.source)}</code>, read {esc(report.generated)}</dd>",
+             f"<dt>Code</dt><dd>{code}</dd>"]
+    for h in report.hosts:
+        gpu = f"GPU {h.gpu}" if h.gpu else "no GPU"
+        soft = h.platform or "platform not recorded"
+        if h.platform and not h.torch:
+            soft += "; torch version not recorded"
+        items.append(f"<dt>Machine</dt><dd><b>{esc(h.host)}</b>: {esc(h.cpu_model or 'CPU model not recorded')}, "
+                     f"{h.cores} cores, {h.threads} threads, {esc(gpu)}; {esc(soft)} "
+                     f'<span class="meta">({h.cells} rows)</span></dd>')
+    items.append("<dt>Timings</dt><dd>from the machine that ran each cell: compare them between cells of one "
+                 'machine (<a href="#machine-speed">machine speed</a>)</dd>')
+    return [f'<dl class="provenance">{"".join(items)}</dl>']
+
+
+def _fill_drilldowns(body: list[str], report: view.Report, drills: dict) -> list[str]:
+    """Put each section's heat map at its mark, linking to the figures the page holds."""
+    import re
+
+    ids = set(re.findall(r'\bid="([^"]+)"', "".join(body)))
+    sections = {f"s{i}": s for i, s in enumerate(report.sections)}
+
+    def links_for(sid: str):
+        me = sections[sid]
+        kin = [k for k, s in sections.items() if getattr(s, "kind", "") == "table" and s.dataset == me.dataset
+               and s.fingerprint == me.fingerprint]
+
+        def links(material: str) -> dict[str, str]:
+            out = {}
+            for kind in ("lobe", "render"):
+                for k in [sid, *kin]:
+                    target = anchor(k, kind, material)
+                    if target in ids:
+                        out[kind] = f"#{target}"
+                        break
+            return out
+        return links
+
+    out = []
+    for part in body:
+        for sid, d in drills.items():
+            mark = DRILLDOWN_MARK.format(sid=sid)
+            if mark in part:
+                part = part.replace(mark, "".join(drilldown_html.heatmap(d, sid, links_for(sid))))
+        out.append(part)
+    return out
 
 
 def machine_section(machines: list) -> list[str]:

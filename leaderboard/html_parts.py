@@ -7,7 +7,7 @@ import html
 import io
 from importlib import resources
 
-from .markdown import fmt
+from .units import fmt
 from .view import Cell, Metric
 
 CONTENDED = "†"

@@ -2,28 +2,18 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Collection
 
 import pandas as pd
 
 from . import plots as plots_module
 from . import view
+from .units import fmt
 from .view import Cell, ConvergenceSection, Metric, TableSection
 
 #: Marks a timing measured while other brdfbench jobs ran on the same host.
 CONTENDED = "†"
 ON_GPU = "‡"
-
-
-def fmt(value: float | None) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "–"
-    if value == 0:
-        return "0"
-    if abs(value) >= 1e5 or abs(value) < 1e-3:
-        return f"{value:.3e}"
-    return f"{value:.4g}"
 
 
 def _table(header: list[str], rows: list[list[str]]) -> list[str]:
@@ -38,11 +28,12 @@ def cell_text(cell: Cell | None, metric: Metric | None = None) -> str:
         return "–"
     timed = metric is not None and metric.timed
     mark = (CONTENDED if timed and cell.contended else "") + (ON_GPU if timed and cell.accelerator else "")
+    show = metric.show if metric is not None else fmt
     if cell.complete:
-        return fmt(cell.value) + mark
+        return show(cell.value) + mark
     if cell.partial is None:
         return "–"
-    return f"– ({fmt(cell.partial)}{mark} over {cell.n}/{cell.expected})"
+    return f"– ({show(cell.partial)}{mark} over {cell.n}/{cell.expected})"
 
 
 def _interval(cell: Cell | None) -> str:
@@ -52,7 +43,7 @@ def _interval(cell: Cell | None) -> str:
 
 
 def _header(metric: Metric) -> str:
-    return f"{metric.label} {metric.arrow}".rstrip()
+    return f"{metric.short_label} {metric.arrow}".rstrip()
 
 
 def table_section(s: TableSection) -> list[str]:
@@ -66,13 +57,17 @@ def table_section(s: TableSection) -> list[str]:
     if s.primary is None:
         return lines + ["No successful results yet.", ""] + _failures(s.failures)
     header = ["rank", "representation", *[_header(m) for m in s.accuracy], *[_header(m) for m in s.costs], "materials"]
-    rows = []
+    rows: dict[bool, list[list[str]]] = {True: [], False: []}
     for row in s.rows:
-        cells = [str(row.rank) if row.rank is not None else "–", f"`{row.label}`"]
+        cells = ["ref." if row.reference else (str(row.rank) if row.rank is not None else "–"), f"`{row.label}`"]
         cells += [cell_text(row.cell(m.name), m) for m in [*s.accuracy, *s.costs]]
         primary = row.cell(s.primary.name)
         cells.append(f"{primary.n if primary else 0}/{len(s.materials)}")
-        rows.append(cells)
+        rows[row.reference].append(cells)
+    reference = []
+    if rows[True]:
+        reference = ["**Reference** (the target scored against itself: what a perfect model would score; never "
+                     "ranked):", "", *_table(header, rows[True]), "", "**Ranking:**", ""]
     lines += [
         "### Accuracy and its cost",
         "",
@@ -81,10 +76,13 @@ def table_section(s: TableSection) -> list[str]:
         "bytes the median. Representations that train on a split (train time, "
         "shared bytes) are cross-validated: each material is scored by a model trained without it. "
         "↓ lower is better, ↑ higher is better. A configuration without a figure for every material has no mean "
-        "(shown as – with the partial mean over the materials it has) and is not ranked.",
+        "(shown as – with the partial mean over the materials it has) and is not ranked. Byte counts use "
+        "1 kB = 1000 B.",
         "",
-        *_table(header, rows),
+        *reference,
+        *_table(header, rows[False]),
         "",
+        *_hardest(s),
         *([f"{CONTENDED} measured while other brdfbench jobs ran on the same host: timings are not comparable "
            "with unmarked ones.", ""] if s.contended else []),
         *([f"{ON_GPU} computed on a GPU ({', '.join(s.accelerators)}): these timings are not comparable with CPU "
@@ -122,6 +120,14 @@ def table_section(s: TableSection) -> list[str]:
                                  for row in s.rows])
         lines.append("")
     return lines + _failures(s.failures)
+
+
+def _hardest(s: TableSection) -> list[str]:
+    """The per-material drill-down in one paragraph (the HTML page has its heat map)."""
+    from . import drilldown
+
+    d = drilldown.build(s)
+    return [] if d is None else [drilldown.summary(d), ""]
 
 
 def sharpness_caption(split: view.Split) -> str:
@@ -175,7 +181,8 @@ def render_view(report: view.Report, plots: Collection[str] = ()) -> str:
     if report.empty:
         return "\n".join(lines + ["The results store is empty.", ""])
     lines += [f"brdfbench {', '.join(report.versions)}; git {', '.join(report.git_shas)}. "
-              "Timings are from the machine that ran each cell.", ""]
+              "Timings are from the machine that ran each cell:", ""]
+    lines += [f"- {line}" for line in host_lines(report.hosts)] + [""]
     from . import generation_render
 
     for s in report.sections:
@@ -187,6 +194,18 @@ def render_view(report: view.Report, plots: Collection[str] = ()) -> str:
             lines += table_section(s)
     lines += machine_section(report.machines)
     return "\n".join(lines)
+
+
+def host_lines(hosts: list) -> list[str]:
+    """One line per machine that produced figures (`view.Host`)."""
+    out = []
+    for h in hosts:
+        soft = h.platform or "platform not recorded"
+        if h.platform and not h.torch:
+            soft += "; torch version not recorded"
+        out.append(f"{h.host}: {h.cpu_model or 'CPU model not recorded'}, {h.cores} cores, {h.threads} threads, "
+                   f"{'GPU ' + h.gpu if h.gpu else 'no GPU'}; {soft} ({h.cells} rows)")
+    return out
 
 
 def machine_section(machines: list) -> list[str]:

@@ -44,7 +44,7 @@ def scaled(value: float, unit: str) -> tuple[str, str]:
         return ("–" if value is None or math.isnan(value) else ("∞" if value > 0 else "−∞")), unit
     span = _SCALED.get(unit)
     if span is None or value == 0:
-        return (_plain(value), unit)
+        return (fmt(value), unit)
     lo, hi = span
     exponent = int(math.floor(math.log10(abs(value)) / 3))
     exponent = min(max(exponent, lo), hi)
@@ -56,6 +56,11 @@ def scaled(value: float, unit: str) -> tuple[str, str]:
     return _sig(mantissa), (f"{prefix} {unit}" if prefix and unit in _WORDS else prefix + unit)
 
 
+def scales(unit: str) -> bool:
+    """Whether figures in `unit` are printed with a prefix (and so carry their unit)."""
+    return unit in _SCALED
+
+
 def human(value: float | None, unit: str) -> str:
     """`value` in `unit` as one string ("12.3 ms", "250 MB", "5.8 M evals/s")."""
     number, shown = scaled(value, unit)
@@ -64,7 +69,10 @@ def human(value: float | None, unit: str) -> str:
     return f"{number} {shown}".rstrip()
 
 
-def _plain(value: float) -> str:
+def fmt(value: float | None) -> str:
+    """A figure without a unit to scale: four significant digits, an exponent outside [1e-3, 1e5)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "–"
     if value == 0:
         return "0"
     if abs(value) >= 1e5 or abs(value) < 1e-3:

@@ -24,11 +24,14 @@ import pandas as pd
 
 from brdfbench.pipeline import calibration
 
-from . import tables
+from . import tables, units
 
 BOOTSTRAP_RESAMPLES = 2000
 CONFIDENCE = 0.95
 BOOTSTRAP_SEED = 0
+#: Fewer materials than this get no interval: a bootstrap of two or three values says
+#: little about the spread of a mean and would read as more certain than it is.
+MIN_INTERVAL_N = 5
 
 COST_LABELS = {
     "fit_loss": "own fit loss",
@@ -62,6 +65,20 @@ class Metric:
     @property
     def label(self) -> str:
         return COST_LABELS.get(self.name, self.name)
+
+    @property
+    def short_label(self) -> str:
+        """The label without the unit where cells print their own ("fit time (s)" → "fit time")."""
+        text = self.label
+        if self.kind == "cost" and units.scales(self.unit) and text.endswith(")") and " (" in text:
+            text = text[:text.rindex(" (")]
+        return text
+
+    def show(self, value: float | None) -> str:
+        """A figure as printed: costs in readable units (12.3 ms, 1.27 kB), the rest as measured."""
+        if self.kind == "cost" and units.scales(self.unit):
+            return units.human(value, self.unit)
+        return units.fmt(value)
 
     @property
     def directed(self) -> bool:
@@ -165,6 +182,10 @@ class TableSection:
     failures: list[Failure]
     material_categories: dict[str, str] = field(default_factory=dict)
     sharpness: Split | None = None
+    #: accuracy metric → (config hash, material) → that material's figure (the drill-down)
+    per_material: dict[str, dict[tuple[str, str], float]] = field(default_factory=dict)
+    #: material → its target's lobe half-width (rad), where the cells recorded one
+    lobe_widths: dict[str, float] = field(default_factory=dict)
     kind: str = field(default="table", init=False)
 
     @property
@@ -239,6 +260,42 @@ class Report:
     sections: list  # TableSection | ConvergenceSection | generation_view.GenerationSection
     empty: bool
     machines: list = field(default_factory=list)  # MachineSpeed of every host and thread count
+    hosts: list = field(default_factory=list)  # Host: every machine that produced a figure
+
+
+@dataclass(frozen=True)
+class Host:
+    """A machine (and thread count) that produced figures of the store: what a reader needs
+    to know before comparing its timings with their own."""
+
+    host: str
+    cpu_model: str
+    cores: int  # usable by the process
+    threads: int  # torch threads of its tasks
+    gpu: str  # the accelerator's description, "" for none
+    platform: str  # OS, Python and torch versions ("" in stores older than its recording)
+    cells: int  # rows measured there
+
+    @property
+    def torch(self) -> str:
+        """The torch version, where the platform recorded it."""
+        _, found, rest = self.platform.partition(" torch ")
+        return rest.split()[0] if found and rest else ""
+
+
+def hosts(df: pd.DataFrame) -> list[Host]:
+    """The machines of a store's rows, most rows first."""
+    got = df.copy()
+    for col, default in (("host", ""), ("cpu_model", ""), ("cpu_count", 0), ("threads", 0),
+                         ("device_detail", "cpu"), ("platform", "")):
+        if col not in got.columns:
+            got[col] = default
+    keys = ["host", "cpu_model", "cpu_count", "threads", "device_detail", "platform"]
+    counts = got.groupby(keys, dropna=False).size().reset_index(name="rows")
+    out = [Host(str(r.host), str(r.cpu_model), int(r.cpu_count), int(r.threads),
+                "" if str(r.device_detail) in ("cpu", "", "nan") else str(r.device_detail), str(r.platform), int(r.rows))
+           for r in counts.itertuples()]
+    return sorted(out, key=lambda h: (-h.cells, h.host, h.threads))
 
 
 @dataclass(frozen=True)
@@ -317,7 +374,7 @@ def _cell(values: np.ndarray, metric: Metric, expected: int, contended: bool, ac
     agg = _aggregate(values, metric.aggregate)
     worst = float(values.min() if metric.higher_is_better else values.max())
     lo = hi = None
-    if metric.kind == "accuracy":
+    if metric.kind == "accuracy" and n >= MIN_INTERVAL_N:
         lo, hi = bootstrap_interval(values)
     complete = n >= expected
     return Cell(agg if complete else None, n, expected, lo if complete else None, hi if complete else None,
@@ -404,9 +461,20 @@ def table_section(key: tuple[str, str, str, str], df: pd.DataFrame, widths: dict
     cats = {}
     if "category" in df.columns:
         cats = {str(m): str(c) for m, c in df.drop_duplicates("material")[["material", "category"]].itertuples(index=False)}
+    widths = widths or {}
     return TableSection(dataset, fingerprint, scene, harness, materials, tables.dataset_caveat(dataset), primary,
                         accuracy, costs, rows, _categories(ok, primary, rows), _failures(df), cats,
-                        _sharpness(ok, accuracy, rows, materials, widths or {}))
+                        _sharpness(ok, accuracy, rows, materials, widths), _per_material(ok, accuracy),
+                        {m: widths[m] for m in materials if m in widths})
+
+
+def _per_material(ok: pd.DataFrame, accuracy: list[Metric]) -> dict[str, dict[tuple[str, str], float]]:
+    out: dict[str, dict[tuple[str, str], float]] = {}
+    for metric in accuracy:
+        got = ok[ok.metric == metric.name].drop_duplicates(["config_hash", "material"], keep="last")
+        out[metric.name] = {(str(h), str(m)): float(v) for h, m, v in
+                            got[["config_hash", "material", "value"]].itertuples(index=False)}
+    return out
 
 
 #: Accuracy metrics the sharpest-decile split shows, where present (else the ranking one).
@@ -495,6 +563,7 @@ def build(df: pd.DataFrame, source: str) -> Report:
     from .generation_view import generation_section
 
     machines = machine_speeds(df)
+    used = hosts(df)
     df = df[df.metric != calibration.METRIC]  # the machine's figure, not a model's
     sections: list = []
     widths = lobe_widths(df)
@@ -506,4 +575,4 @@ def build(df: pd.DataFrame, source: str) -> Report:
         else:
             sections.append(table_section((name, fingerprint, scene, harness), group, widths.get(str(fingerprint))))
     return Report(source, generated, sorted(set(map(str, df.package_version))),
-                  sorted({str(s)[:10] for s in df.git_sha}), sections, False, machines)
+                  sorted({str(s)[:10] for s in df.git_sha}), sections, False, machines, used)

@@ -14,6 +14,7 @@ import platform
 import socket
 import tempfile
 from functools import lru_cache
+from importlib import metadata
 from pathlib import Path
 
 from ..provenance import config_hash
@@ -40,11 +41,20 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
+def platform_text() -> str:
+    """OS, architecture, Python and torch versions: what a report says produced its figures."""
+    try:
+        torch_version = metadata.version("torch")
+    except metadata.PackageNotFoundError:
+        torch_version = "absent"
+    return f"{platform.system()} {platform.machine()} Python {platform.python_version()} torch {torch_version}"
+
+
 def environment(threads: int, launcher: str, device: tuple[str, str] = ("cpu", "cpu")) -> Environment:
     """This host's environment; `device` is (name, description) of where the figures were
     computed (`brdfbench.device.name` and `describe`)."""
     fields = {"host": socket.gethostname(), "cpu_model": cpu_model(), "cpu_count": usable_cores(), "threads": int(threads),
-              "launcher": launcher, "platform": f"{platform.system()} {platform.machine()} Python {platform.python_version()}"}
+              "launcher": launcher, "platform": platform_text()}
     if device[0] != "cpu":  # a CPU environment keeps the id it had before devices were recorded
         fields.update(device=device[0], device_detail=device[1])
     return Environment(env_id=config_hash(fields), **fields)

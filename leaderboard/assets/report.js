@@ -12,7 +12,12 @@
     var ascending = th.getAttribute("aria-sort") !== "ascending";
     Array.prototype.forEach.call(table.tHead.rows[0].cells, function (h) { h.removeAttribute("aria-sort"); });
     th.setAttribute("aria-sort", ascending ? "ascending" : "descending");
-    var body = table.tBodies[0];
+    // every row group but the reference one (the target itself stays above the ranking)
+    Array.prototype.forEach.call(table.tBodies, function (body) {
+      if (!body.classList.contains("reference")) sortBody(body, column, ascending);
+    });
+  }
+  function sortBody(body, column, ascending) {
     var rows = Array.prototype.slice.call(body.rows);
     rows.sort(function (a, b) {
       var x = sortKey(a.cells[column]), y = sortKey(b.cells[column]);
