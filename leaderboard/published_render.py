@@ -1,63 +1,103 @@
-"""The source papers' figures beside ours as an HTML section (`published.compare`)."""
+"""The source papers' figures beside ours as an HTML section (`published.compare`).
+
+One narrow table that fits the page: the paper's model and citation, the metric, theirs,
+ours, the verdict with its reasons under it, and the setups' differences, long text
+wrapping (`assets/published.css`)."""
 
 from __future__ import annotations
 
-from . import published, view
-from .html_parts import esc, number, span, th
-from .markdown import fmt
+import re
+
+from . import published, units, view
+from .html_parts import esc, number, th
+
+#: Columns: (header, class of its <col>, whether its cells are text).
+COLUMNS = (("model (theirs) and source", "p-source", True), ("metric", "p-metric", True), ("theirs", "p-theirs", False),
+           ("ours", "p-ours", False), ("verdict", "p-verdict", True), ("setup", "p-setup", True))
+_CODE = re.compile(r"`([^`]+)`")
+VERDICT_CLASS = {published.AGREES: "verdict-yes", published.DIFFERS: "verdict-no"}
+
+
+def code_html(text: str) -> str:
+    """Plain text with `names` in backticks as HTML, the names as code."""
+    return _CODE.sub(lambda m: f"<code>{m.group(1)}</code>", esc(text))
+
+
+def verdict_class(c: published.Comparison) -> str:
+    """The verdict cell's class: agrees, does not reproduce, not comparable (muted), or missing."""
+    return VERDICT_CLASS.get(c.verdict, "verdict-na" if c.mismatch else "missing")
+
+
+def _ci(lines) -> str:
+    return "".join(f'<span class="ci">{esc(t)}</span>' for t in lines if t)
+
+
+def our_data(c: published.Comparison) -> str:
+    """Which of our sections the figure comes from: its dataset, materials and scene."""
+    s = c.section
+    if s is None:
+        return ""
+    return f"{s.dataset}, {len(s.materials)} materials" + ("" if s.scene == "brdf_space" else f", {s.scene}")
+
+
+def theirs_text(c: published.Comparison) -> tuple[str, str]:
+    """(as printed with the paper's unit, in our unit where that reads differently)."""
+    p = c.published
+    if p is None:
+        return "–", ""
+    printed = f"{p.printed or p.value} {p.unit}".strip()
+    if c.metric is None or c.theirs is None:
+        return printed, ""
+    if c.match.scale == 1 and (c.metric.kind != "cost" or p.unit == c.metric.unit):
+        return printed, ""
+    number_, unit = units.scaled(c.theirs, c.metric.unit) if c.metric.kind == "cost" else (units.human(c.theirs, ""), "")
+    try:
+        same = unit == p.unit and float(number_) == p.value
+    except ValueError:
+        same = False
+    return printed, "" if same else f"= {published.show(c.theirs, c.metric)}"
+
+
+def _row(c: published.Comparison) -> str:
+    p, m = c.published, c.match
+    where, what = published.citation(p.source if p else m.seed, p.table if p else m.table)
+    printed, converted = theirs_text(c)
+    ours, ours_sort = "–", None
+    if c.ours is not None:
+        value = c.ours.value if c.ours.complete else c.ours.partial
+        ours, ours_sort = published.show(value, c.metric), c.ours.value if c.ours.complete else None
+    notes = c.notes or ((c.detail,) if c.detail else ())
+    return (f'<tr><td class="label" title="{esc(what)}">{esc(m.model)}{_ci([where])}</td>'
+            f'<td class="label">{esc(m.metric)} → <code>{esc(m.our_metric)}</code></td>'
+            f'<td data-sort="{number(c.theirs)}">{esc(printed)}{_ci([converted])}</td>'
+            f'<td data-sort="{number(ours_sort)}">{esc(ours)}{_ci([c.label, our_data(c)])}</td>'
+            f'<td class="label verdict {verdict_class(c)}">{esc(c.verdict)}{_ci(notes)}</td>'
+            f'<td class="label setup">{esc(m.setup)}</td></tr>')
+
+
+def _table(tid: str, rows: list[published.Comparison]) -> str:
+    cols = "".join(f'<col class="{cls}">' for _, cls, _ in COLUMNS)
+    head = "".join(th(name, cls="label" if text else "") for name, _, text in COLUMNS)
+    body = "".join(_row(c) for c in rows)
+    return (f'<div class="scroll"><table class="sortable published" id="{tid}"><colgroup>{cols}</colgroup>'
+            f"<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>")
 
 
 def published_section(report: view.Report) -> list[str]:
     """The source papers' figures beside ours (`published.compare`); says so where they cannot be read."""
-    out = ['<h2 id="published">Published figures beside ours</h2>',
-           '<p class="note">Figures as printed in the source papers, converted to our unit, beside our figure for '
-           "the same model and metric, with how the setups differ. A figure within a factor of "
-           f"{published.AGREEMENT_FACTOR:g} of the published one (within 3 dB for PSNR; 1 − SSIM within a factor of "
-           f"{published.AGREEMENT_FACTOR:g} for SSIM) is said to agree; any other does not reproduce. Timings and "
-           "throughputs are from other hardware: their ratio is not a verdict on the method. Under each of our "
-           "figures is the configuration that produced it, which names its recipe: <code>nbrdf</code>, "
-           "<code>naive_mlp</code>, <code>tripleplane</code>, <code>triplane_gated</code> and "
-           "<code>hyperdiffusion</code> train on this project's schedules, sized for a CPU; "
-           f"{', '.join(f'<code>{n}</code>' for n in published.PUBLISHED_RECIPES)} on the papers' own recipes "
-           "(see the README's GPUs section).</p>"]
+    out = ['<h2 id="published">Published figures beside ours</h2>']
+    out += [f'<p class="note">{code_html(text)}</p>' for text in published.note()]
     try:
         rows = published.compare(report)
     except (OSError, ValueError, KeyError) as exc:
         return out + [f'<p class="missing">The published figures could not be read ({esc(exc)}); '
                       "this section is empty.</p>"]
-    head = "".join(th(t, cls="label" if i in (0, 1, 2, 7, 8) else "") for i, t in enumerate(
-        ("source", "model (theirs)", "metric", "theirs", "theirs, our unit", "ours", "verdict", "our data", "setup")))
-    body: dict[bool, list[str]] = {True: [], False: []}  # measured here, or not
-    for c in rows:
-        p, m = c.published, c.match
-        theirs = "–" if p is None else f"{fmt(p.value)} {p.unit}".strip()
-        ours = "–"
-        if c.ours is not None:
-            ours = fmt(c.ours.value if c.ours.complete else c.ours.partial)
-        data = "–" if c.section is None else (f"{c.section.dataset} ({len(c.section.materials)} materials)"
-                                              + ("" if c.section.scene == "brdf_space" else f", {c.section.scene}"))
-        cls = {"agrees": "verdict-yes", "does not reproduce": "verdict-no"}.get(c.verdict, "missing")
-        label = "" if c.section is None else next((r.label for r in c.section.rows if r.cell(m.our_metric) is c.ours), "")
-        where, what = published.citation(p.source if p else m.seed, p.table if p else m.table)
-        body[c.section is not None].append(
-            f'<tr><td class="label">{esc(where)}<span class="ci">{esc(what)}'
-            f'</span></td><td class="label">{esc(m.model)}</td><td class="label">{esc(m.metric)} → '
-            f'<code>{esc(m.our_metric)}</code></td><td data-sort="{number(p.value if p else None)}">{esc(theirs)}</td>'
-            f'<td data-sort="{number(c.theirs)}">{fmt(c.theirs)}</td>'
-            f'<td data-sort="{number(c.ours.value if c.ours is not None and c.ours.complete else None)}">{ours}'
-            f"{span(label)}</td>"
-            f'<td class="{cls}">{esc(c.verdict)}<span class="ci">{esc(c.detail)}</span></td>'
-            f'<td class="label">{esc(data)}</td><td class="label">{esc(m.setup)}</td></tr>')
-    counts = {v: sum(c.verdict == v for c in rows) for v in ("agrees", "does not reproduce", "not measured")}
-    out.append(f'<p class="meta">{counts["agrees"]} agree, {counts["does not reproduce"]} do not reproduce, '
-               f'{counts["not measured"]} not measured in this store.</p>')
-    def table(tid: str, rows_: list[str]) -> str:
-        return (f'<div class="scroll"><table class="sortable" id="{tid}"><thead><tr>{head}</tr></thead>'
-                f"<tbody>{''.join(rows_)}</tbody></table></div>")
-
-    if body[True]:
-        out.append(table("published-table", body[True]))
-    if body[False]:
-        out.append(f"<details><summary>{len(body[False])} published figures with no figure of ours in this store"
-                   f"</summary>{table('published-unmeasured', body[False])}</details>")
+    measured = [c for c in rows if c.section is not None]
+    unmeasured = [c for c in rows if c.section is None]
+    out.append(f'<p class="meta">{esc(published.counts(rows))}</p>')
+    if measured:
+        out.append(_table("published-table", measured))
+    if unmeasured:
+        out.append(f"<details><summary>{len(unmeasured)} published figures with no figure of ours in this store"
+                   f"</summary>{_table('published-unmeasured', unmeasured)}</details>")
     return out
