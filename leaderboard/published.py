@@ -189,7 +189,8 @@ def matches() -> list[Match]:
             for r in _rows(MATCHES_FILE)]
 
 
-def _find(match: Match, published: list[Published]) -> Published | None:
+def find(match: Match, published: list[Published]) -> Published | None:
+    """The published figure a match names (its paper, table, model and metric), if any."""
     for p in published:
         if (p.source.startswith(match.seed + " ") and (p.table == match.table or p.table.startswith(match.table + " "))
                 and p.model == match.model and p.metric == match.metric):
@@ -283,7 +284,7 @@ def compare(report: Report) -> list[Comparison]:
     tables_ = [s for s in report.sections if isinstance(s, TableSection)]
     out = []
     for m in matches():
-        p = _find(m, published)
+        p = find(m, published)
         if p is None:
             out.append(Comparison(m, None, None, None, MISSING,
                                   f"{citation(m.seed, m.table)[0]}: no row for {m.model} / {m.metric} in {FIGURES_FILE}"))
