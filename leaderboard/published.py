@@ -239,10 +239,6 @@ def show(value: float | None, metric: Metric | None) -> str:
     return units.human(value, unit)
 
 
-def _shown_theirs(p: Published, m: Match, metric: Metric) -> str:
-    return show(p.value * m.scale, metric)
-
-
 def _verdict(m: Match, p: Published, s: TableSection, label: str, cell: Cell) -> Comparison:
     """One comparable-or-not row: what keeps it from a verdict, else the factor-of-two rule."""
     metric = s.metrics[m.our_metric]
@@ -258,10 +254,10 @@ def _verdict(m: Match, p: Published, s: TableSection, label: str, cell: Cell) ->
         return Comparison(m, p, s, cell, not_comparable((HARDWARE,)), "; ".join(notes), label, tuple(notes),
                           (HARDWARE,))
     mismatch = []
-    if m.dataset:
+    if m.dataset or metric.kind == "accuracy":  # an accuracy figure depends on the materials, said or not
         ours_set = MEASURED_DATASETS.get(s.dataset, s.dataset)
-        notes.append(f"materials: {len(s.materials)} {ours_set} here, the paper's {m.dataset}")
-        if s.dataset not in MEASURED_DATASETS:
+        notes.append(f"materials: {len(s.materials)} {ours_set} here, the paper's {m.dataset or 'not recorded'}")
+        if s.dataset not in MEASURED_DATASETS or not m.dataset:
             mismatch.append(DATASET)
     if m.paper_recipe and config not in m.recipe_configs:
         follows = (", ".join(m.recipe_configs) + " follows it") if m.recipe_configs else "no configuration here follows it"
