@@ -10,7 +10,7 @@ name in each), so every kind of material is seen once before any is seen twice.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -43,10 +43,19 @@ def chosen_materials(section: TableSection, categories: dict[str, str]) -> list[
 
 
 @dataclass(frozen=True)
+class LobePanel:
+    row: int  # index into the section's rows
+    svg: str  # inline SVG markup: this configuration's slices, the table's on top
+
+
+@dataclass(frozen=True)
 class LobeFigure:
+    """One material's small multiples: a panel per configuration, the references (the
+    target itself, which the dashed table line is) left out, on one shared radial scale."""
+
     material: str
-    svg: str  # inline SVG markup
-    series: list[int]  # indices into the section's rows, in legend order
+    theta_i_deg: list[float]
+    panels: list[LobePanel]
     missing: list[str]  # labels without slices for this material
 
 
@@ -59,6 +68,10 @@ def _radius(values: np.ndarray) -> np.ndarray:
     return np.log10(np.maximum(values, LOBE_FLOOR) / LOBE_FLOOR)
 
 
+def _slices(doc: dict, key: str) -> list[np.ndarray]:
+    return [_luminance(np.asarray(t, dtype=float)) for t in doc[key]]
+
+
 def lobe_figures(section: TableSection, results_dir: Path, categories: dict[str, str], plot_prefix: str) -> list[LobeFigure]:
     from brdfbench.harness import lobes
 
@@ -69,36 +82,47 @@ def lobe_figures(section: TableSection, results_dir: Path, categories: dict[str,
         for k, row in enumerate(section.rows):
             entry = artifacts.lookup(results_dir, row.config_hash, material).get("lobes")
             doc = lobes.read(Path(results_dir) / entry["path"]) if entry else None
-            if doc is None:
-                missing.append(row.label)
-            else:
+            if doc is not None:
                 docs[k] = doc
-        if not docs:
+            elif not row.reference:
+                missing.append(row.label)
+        shown = [k for k in sorted(docs) if not section.rows[k].reference]
+        if not shown:
             continue
-        out.append(LobeFigure(material, _lobe_figure(docs, f"{plot_prefix}-{len(out)}"), sorted(docs),
-                              missing))
+        first = docs[min(docs)]
+        theta_o = np.radians(np.asarray(first["theta_o_deg"], dtype=float))
+        table = _slices(first, "table")
+        models = {k: _slices(docs[k], "model") for k in shown}
+        curves = table + [c for m in models.values() for c in m]
+        finite = [float(np.nanmax(c)) for c in curves if np.isfinite(c).any()]
+        top = max(finite + [LOBE_FLOOR])
+        decades = max(1, math.ceil(float(_radius(np.array(top)))))
+        prefix = f"{plot_prefix}{len(out)}"
+        panels = [LobePanel(k, lobe_svg.lobe_panels(first["theta_i_deg"], theta_o, [_radius(t) for t in table],
+                                                    {k: [_radius(m) for m in models[k]]}, f"{prefix}-{k}",
+                                                    int(math.log10(LOBE_FLOOR)), decades=decades, linear_max=top))
+                  for k in shown]
+        out.append(LobeFigure(material, [float(t) for t in first["theta_i_deg"]], panels, missing))
     return out
 
 
-def _lobe_figure(docs: dict[int, dict], plot_id: str) -> str:
-    first = docs[min(docs)]
-    theta_o = np.radians(np.asarray(first["theta_o_deg"], dtype=float))
-    table = [_radius(_luminance(np.asarray(t, dtype=float))) for t in first["table"]]
-    models = {k: [_radius(_luminance(np.asarray(m, dtype=float))) for m in doc["model"]] for k, doc in docs.items()}
-    return lobe_svg.lobe_panels(first["theta_i_deg"], theta_o, table, models, plot_id,
-                                int(math.log10(LOBE_FLOOR)))
-
-
 # --------------------------------------------------------------------------- image grids
+
+FLIP_CMAP = "magma"  # the FLIP map, 0 (black) to 1
+RELATIVE_CMAP = "inferno"  # the relative error in luminance, 0 to REL_ERROR_MAX
+#: The stored per-material figures printed under each render, where the section has them.
+IMAGE_FIGURES = ("psnr_ldr", "flip_ldr")
 
 
 @dataclass(frozen=True)
 class ImageCell:
     label: str
+    config_hash: str
     image: str | None  # paths relative to the results folder (None: not saved)
     flip: str | None
     relative: str | None
     note: str = ""
+    figures: dict[str, float] = field(default_factory=dict)  # metric → this material's stored figure
 
 
 @dataclass(frozen=True)
@@ -107,6 +131,40 @@ class ImageRow:
     reference: str | None
     cells: list[ImageCell]
     caption: str
+
+
+def colour_stops(cmap: str, n: int = 11) -> list[str]:
+    """`n` evenly spaced colours of a matplotlib colormap, as #rrggbb: a colour bar's gradient."""
+    from matplotlib import colormaps
+
+    rgba = colormaps[cmap](np.linspace(0.0, 1.0, n))
+    return ["#" + "".join(f"{int(c * 255 + 0.5):02x}" for c in rgb[:3]) for rgb in rgba]
+
+
+def per_image(section: TableSection, config_hash: str, material: str) -> dict[str, float]:
+    """The stored figures of one configuration's render of one material (`IMAGE_FIGURES`),
+    from the section's per-material values."""
+    got = {name: section.per_material.get(name, {}).get((config_hash, material)) for name in IMAGE_FIGURES}
+    return {name: float(v) for name, v in got.items() if v is not None}
+
+
+def sampler_text(name: str | None, params: dict | None) -> str:
+    if not name:
+        return ""
+    inner = ", ".join(f"{k}={v:g}" if isinstance(v, (int, float)) else f"{k}={v}" for k, v in sorted((params or {}).items()))
+    return f"{name}({inner})" if inner else name
+
+
+def _caption(meta: dict) -> str:
+    """How the images shown were rendered and how the stored metrics were."""
+    how = [f"simulator {meta.get('simulator')}"]
+    sampler = sampler_text(meta.get("sampler"), meta.get("sampler_params"))
+    if meta.get("spp"):
+        fitted = " (fitted to the material)" if meta.get("display_sampler") == "fitted" else ""
+        how.append(f"shown at {meta['spp']} spp, sampler {sampler}{fitted}")
+    if meta.get("measured_spp"):
+        how.append(f"metrics measured at {meta['measured_spp']} spp, sampler {meta.get('measured_sampler') or sampler}")
+    return ", ".join(how)
 
 
 def _fresh(target: Path, *sources: Path) -> bool:
@@ -142,16 +200,40 @@ def error_maps(results_dir: Path, image_exr: Path, reference_exr: Path, stem: st
     if not (_fresh(flip_png, image_exr, reference_exr) and _fresh(rel_png, image_exr, reference_exr)):
         image, reference = read_exr(image_exr), read_exr(reference_exr)
         _, fmap = flip(image, reference, space="ldr", exposure=exposure, return_map=True)
-        _write_map(flip_png, fmap.numpy(), "magma", 1.0)
+        _write_map(flip_png, fmap.numpy(), FLIP_CMAP, 1.0)
         lum = lambda x: (x.to(torch.float64) @ torch.tensor([0.2126, 0.7152, 0.0722], dtype=torch.float64)).numpy()
         ref = lum(reference)
         rel = np.abs(lum(image) - ref) / np.maximum(ref, 1e-3 * max(float(ref.max()), 1e-12))
-        _write_map(rel_png, rel, "inferno", REL_ERROR_MAX)
+        _write_map(rel_png, rel, RELATIVE_CMAP, REL_ERROR_MAX)
     root = Path(results_dir)
     return str(flip_png.relative_to(root)), str(rel_png.relative_to(root))
 
 
+def _png(results_dir: Path, exr: Path) -> str:
+    return str(exr.with_suffix(".png").relative_to(results_dir))
+
+
+def _cell(section: TableSection, row, material: str, results_dir: Path, entries: dict) -> ImageCell:
+    image, ref = entries.get("image"), entries.get("reference")
+    figures = per_image(section, row.config_hash, material)
+    if not image or not ref:
+        return ImageCell(row.label, row.config_hash, None, None, None, "no saved render", figures)
+    image_exr, ref_exr = results_dir / image["path"], results_dir / ref["path"]
+    if not (image_exr.is_file() and ref_exr.is_file()):
+        return ImageCell(row.label, row.config_hash, None, None, None, "render file missing", figures)
+    try:
+        flip_png, rel_png = error_maps(results_dir, image_exr, ref_exr, f"{row.config_hash}-{artifacts._safe(material)}",
+                                       float(image.get("exposure") or 0.0))
+    except Exception as exc:  # an unreadable EXR: say so in place of the maps
+        return ImageCell(row.label, row.config_hash, _png(results_dir, image_exr), None, None,
+                         f"error maps failed: {exc}", figures)
+    return ImageCell(row.label, row.config_hash, _png(results_dir, image_exr), flip_png, rel_png, "", figures)
+
+
 def image_rows(section: TableSection, results_dir: Path, categories: dict[str, str]) -> list[ImageRow]:
+    """Per chosen material: the reference render (the table's) and each configuration's
+    render with its error maps; the references (the target itself) get no column of their
+    own, their render being the reference's."""
     results_dir = Path(results_dir)
     out = []
     for material in chosen_materials(section, categories):
@@ -159,31 +241,12 @@ def image_rows(section: TableSection, results_dir: Path, categories: dict[str, s
         for row in section.rows:
             entries = artifacts.lookup(results_dir, row.config_hash, material)
             image, ref = entries.get("image"), entries.get("reference")
-            if not image or not ref:
-                cells.append(ImageCell(row.label, None, None, None, "no saved render"))
-                continue
-            image_exr, ref_exr = results_dir / image["path"], results_dir / ref["path"]
-            if not (image_exr.is_file() and ref_exr.is_file()):
-                cells.append(ImageCell(row.label, None, None, None, "render file missing"))
-                continue
-            meta = meta or image
-            reference = reference or str(ref_exr.with_suffix(".png").relative_to(results_dir))
-            try:
-                flip_png, rel_png = error_maps(results_dir, image_exr, ref_exr,
-                                               f"{row.config_hash}-{artifacts._safe(material)}",
-                                               float(image.get("exposure") or 0.0))
-            except Exception as exc:  # an unreadable EXR: say so in place of the maps
-                cells.append(ImageCell(row.label, str(image_exr.with_suffix(".png").relative_to(results_dir)), None,
-                                       None, f"error maps failed: {exc}"))
-                continue
-            cells.append(ImageCell(row.label, str(image_exr.with_suffix(".png").relative_to(results_dir)), flip_png,
-                                   rel_png))
-        if reference is None:
+            if image and ref and (results_dir / ref["path"]).is_file():
+                meta = meta or image
+                reference = reference or _png(results_dir, results_dir / ref["path"])
+            if not row.reference:
+                cells.append(_cell(section, row, material, results_dir, entries))
+        if reference is None or not cells:
             continue
-        how = [f"simulator {meta.get('simulator')}"]
-        if meta.get("spp"):
-            how.append(f"shown at {meta['spp']} spp, sampler {meta.get('sampler')}")
-        if meta.get("measured_spp"):
-            how.append(f"metrics measured at {meta['measured_spp']} spp")
-        out.append(ImageRow(material, reference, cells, ", ".join(how)))
+        out.append(ImageRow(material, reference, cells, _caption(meta)))
     return out
