@@ -50,7 +50,7 @@ def payload(c: pareto.Chart, plot_id: str) -> dict:
                       for plugin, pts in pareto.size_curves(panel).items()]
         panels.append(dict(
             cost=cost.name, xUp=cost.higher_is_better, title=f"{primary.name} against {cost.label}",
-            xTitle=pareto.x_title(cost), points=pts, curves=curves,
+            xTitle=pareto.x_title(panel), points=pts, curves=curves,
             # the widest the axes can get (every series shown, padded); the script keeps the ticks inside its limits
             xTicks=svg_plot.log_ticks(*_wide(svg_plot.log_range(xs)), pareto.x_tick(cost)),
             yTicks=svg_plot.log_ticks(*_wide(svg_plot.log_range(ys)), svg_plot.plain) if c.y_log else []))

@@ -160,12 +160,14 @@ def direction(metric: Metric) -> str:
     return "higher is better" if metric.higher_is_better else "lower is better"
 
 
-def x_title(cost: Metric) -> str:
+def x_title(panel: Panel) -> str:
     """The cost axis's title (its tick labels carry the unit)."""
+    cost = panel.cost
     words = {"fit_time": "fit time per material", "evals_per_s": "BRDF evaluations per second",
-             "render_samples_per_s": "render samples per second", BYTES: "bytes per material (shared amortised)",
+             "render_samples_per_s": "render samples per second", BYTES: "bytes per material",
              "flops_per_eval": "FLOPs per evaluation"}
-    return f"{words.get(cost.name, cost.label)}, {direction(cost)}"
+    shared = " (shared bytes amortised)" if any(p.shared for p in panel.points) else ""
+    return f"{words.get(cost.name, cost.label)}{shared}, {direction(cost)}"
 
 
 def y_title(primary: Metric) -> str:
@@ -192,8 +194,8 @@ def figure(c: Chart, plot_id: str) -> str:
     columns = min(COLUMNS, len(c.panels))
     rows = -(-len(c.panels) // columns)
     width, height = PANEL_W * columns, PANEL_H * rows
-    out = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {width:.0f} {height:.0f}" width="{width:.0f}" '
-           f'height="{height:.0f}" font-family="sans-serif" role="img">']
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {width:.0f} {height:.0f}" width="100%" '
+           'font-family="sans-serif" role="img">']
     for j, panel in enumerate(c.panels):
         out.append(_panel(c, panel, plot_id, PANEL_W * (j % columns), PANEL_H * (j // columns)))
     out.append("</svg>")
@@ -212,7 +214,7 @@ def _panel(c: Chart, panel: Panel, plot_id: str, left: float, top: float) -> str
     x_ticks = svg_plot.pick_log_ticks(svg_plot.log_ticks(*x_range, x_tick(cost)), 5)
     y_ticks = (svg_plot.pick_log_ticks(svg_plot.log_ticks(*y_range, svg_plot.plain), 6) if c.y_log
                else svg_plot.linear_ticks(*y_range, 6))
-    out = [ax.frame(x_ticks, y_ticks, x_title(cost), y_title(primary), f"{primary.name} against {cost.label}", FONT)]
+    out = [ax.frame(x_ticks, y_ticks, x_title(panel), y_title(primary), f"{primary.name} against {cost.label}", FONT)]
     if panel.front:
         xs, ys = _staircase(panel.front)
         out.append(f'<path id="{plot_id}-front-{cost.name}" d="{ax.path(xs, ys)}" fill="none" stroke="#595959" '
