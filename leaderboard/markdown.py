@@ -8,6 +8,7 @@ import pandas as pd
 
 from . import plots as plots_module
 from . import view
+from .published_markdown import published_markdown
 from .units import fmt
 from .view import Cell, ConvergenceSection, Metric, TableSection
 
@@ -192,6 +193,7 @@ def render_view(report: view.Report, plots: Collection[str] = ()) -> str:
             lines += generation_render.markdown(s)
         else:
             lines += table_section(s)
+    lines += published_markdown(report)
     lines += machine_section(report.machines)
     return "\n".join(lines)
 
