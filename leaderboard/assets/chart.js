@@ -203,7 +203,7 @@
     var px = scale(xl, true, left, width - right);
     var xTicks = logTicks(panel.xTicks, xl[0], xl[1]).filter(function (t) {
       var half = m.width(t[1]) / 2;
-      return px(t[0]) - half >= 0 && px(t[0]) + half <= width;
+      return px(t[0]) - half >= left - 6 && px(t[0]) + half <= width;  // clear of the y ticks' labels
     });
     xTicks = thin(xTicks, px, function (t) { return m.width(t[1]); }, 12);
 
