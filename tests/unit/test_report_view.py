@@ -124,7 +124,7 @@ def test_published_agreement_rules():
 def test_every_match_names_a_published_row_with_its_source():
     figures = published.figures()
     for m in published.matches():
-        p = published._find(m, figures)
+        p = published.find(m, figures)
         assert p is not None, m
         assert p.source.startswith("seed 00")  # the data's key; a report shows the citation
         where, _ = published.citation(p.source, p.table)
@@ -136,7 +136,9 @@ def test_published_figures_beside_ours_say_whether_they_reproduce():
     df = pd.concat([df, df[df.metric == "l1_log_cos"].assign(metric="hdr_rmse", value=0.65, unit="1/sr")])
     report = view.build(df, "s")
     rows = {(c.match.table, c.match.metric): c for c in published.compare(report) if c.match.representation == "nbrdf"}
-    assert rows[("Table 4", "RMSE-HDR")].verdict == "agrees"  # 0.65 beside Timonen et al.'s 0.6534
+    # 0.65 beside Timonen et al.'s 0.6534, but over synthetic materials on this project's recipe:
+    # no verdict, the mismatch named (the factor-of-two rule is in test_published_verdicts)
+    assert rows[("Table 4", "RMSE-HDR")].verdict == "not comparable (dataset, recipe)"
     assert rows[("Table 3", "total memory")].verdict == "agrees"  # 2700 B beside 2.25 kB
     assert rows[("Table 4.1", "PSNR")].verdict == "not measured"  # no rendered section here
     page = html.render(df, "s")
