@@ -146,7 +146,7 @@ def test_published_figures_beside_ours_say_whether_they_reproduce():
     assert not citations.LABEL.search(page)  # the papers by author, never by internal label
     # the recipe behind each of our figures: the configuration is named, and the section says
     # which configurations train on the papers' own recipes
-    assert "<code>triplane_gated_paper</code>" in page and "papers' own recipes" in page
+    assert "<code>triplane_gated_paper</code>" in page and "papers&#x27; own recipes" in page
     assert all(name in published.PUBLISHED_RECIPES for name in ("nbrdf_reference", "hyperdiffusion_paper"))
 
 
