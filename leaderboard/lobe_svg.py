@@ -100,14 +100,14 @@ def _text(x: float, y: float, text: str, anchor: str = "middle", extra: str = ""
 
 
 def _rings(radii: list[float], labels: list[str], cls: str, cx: float, cy: float) -> list[str]:
-    """Rings at `radii` (px) labelled along the baseline right of the centre, every other
-    label where they would crowd; `cls` is the scale they belong to."""
+    """Rings at `radii` (px) labelled along the baseline right of the centre (every other
+    one from the centre where they would crowd); `cls` is the scale they belong to."""
     hidden = ' display="none"' if cls == "lobe-lin" else ""
     out = [f'<path class="{cls}"{hidden} d="{" ".join(_arc(r, cx, cy) for r in radii if r > 0)}" fill="none" '
            'stroke="#cfd3da" stroke-width="0.8"/>']
     gap = min((b - a for a, b in zip(radii, radii[1:])), default=RADIUS)
-    every = 1 if gap >= 3.2 * FONT else 2
-    shown = [(r, t) for i, (r, t) in enumerate(zip(radii, labels)) if (len(radii) - 1 - i) % every == 0]
+    every = 1 if gap >= 2.6 * FONT else 2
+    shown = [(r, t) for i, (r, t) in enumerate(zip(radii, labels)) if i % every == 0]
     out += [_text(cx + r, cy + FONT + 3, t, extra=f' class="{cls}"{hidden}') for r, t in shown]
     return out
 
