@@ -7,7 +7,9 @@ both images wherever the sampler does not depend on the material: the comparison
 measures the representation, not the noise. References are cached on disk per (scene,
 simulator, sampler, spp, seed, dataset, material) and reused across the representations
 of a sweep. Images land as EXR (radiance) and PNG (tone-mapped) under
-`<results>/renders/<scene>/<simulator key>/`.
+`<results>/renders/<scene>/<simulator key>/`. With `harness.display_spp`, each cell also
+saves the pair the report shows (`DisplayRenders`: that spp, and a BRDF sampler fitted to
+the material), which no metric sees.
 """
 
 from __future__ import annotations
