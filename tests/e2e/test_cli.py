@@ -25,7 +25,7 @@ def test_default_sweep_writes_a_leaderboard_then_skips_done_cells(tmp_path, cli_
     board = (tmp_path / "res" / "leaderboard.md").read_text()
     for name in FIRST_LOOK:
         assert f"`{name}`" in board, name
-    assert "fit time (s)" in board and "evals/s" in board and "bytes" in board
+    assert "fit time ↓" in board and "evals/s" in board and "bytes" in board
     assert "the first look's brief training recipes" in board and "profile=full" in board
     assert "## Machine speed" in board  # the calibration product, stored with every cell
     df = ResultsStore(tmp_path / "res" / "brdfbench.sqlite").frame()
