@@ -93,8 +93,9 @@ def _per_metric(s: TableSection, sid: str) -> list[str]:
             c = row.cell(m.name)
             if c is None:
                 continue
-            rank += 1 if c.complete else 0
-            rows.append(f'<tr><td>{rank if c.complete else "–"}</td><td class="label"><code>{esc(row.label)}</code></td>'
+            rank += 1 if c.complete and not row.reference else 0
+            shown = "ref." if row.reference else (rank if c.complete else "–")
+            rows.append(f'<tr><td>{shown}</td><td class="label"><code>{esc(row.label)}</code></td>'
                         f'{_cell(c, m)}<td data-sort="{number(c.median)}">{fmt(c.median)}</td>'
                         f'<td data-sort="{number(c.worst)}">{fmt(c.worst)}</td><td>{c.n}</td></tr>')
         out += [f"<h3><code>{esc(m.name)}</code> ({esc(m.unit or 'unitless')}, "

@@ -110,6 +110,9 @@ def table(s: TableSection, sid: str, best: dict[str, str | None]) -> list[str]:
     bodies = ""
     if groups[True]:
         bodies += f'<tbody class="reference">{"".join(groups[True])}</tbody>'
+    if not groups[False]:
+        groups[False].append(f'<tr><td class="label" colspan="{len(metrics) + 3}">No configuration to rank beside '
+                             "the reference yet.</td></tr>")
     bodies += f'<tbody class="ranked">{"".join(groups[False])}</tbody>'
     toggle = (f'<input type="checkbox" class="columns-toggle" id="{sid}-all-columns">'
               f'<label class="columns-toggle" for="{sid}-all-columns">show all {len(metrics) + 3} columns '

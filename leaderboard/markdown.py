@@ -81,7 +81,7 @@ def table_section(s: TableSection) -> list[str]:
         "1 kB = 1000 B.",
         "",
         *reference,
-        *_table(header, rows[False]),
+        *(_table(header, rows[False]) if rows[False] else ["No configuration to rank beside the reference yet."]),
         "",
         *_hardest(s),
         *([f"{CONTENDED} measured while other brdfbench jobs ran on the same host: timings are not comparable "
@@ -97,9 +97,12 @@ def table_section(s: TableSection) -> list[str]:
         lines += [f"#### `{metric.name}` ({metric.unit or 'unitless'}, "
                   f"{'higher' if metric.higher_is_better else 'lower'} is better)", ""]
         table_rows = []
-        for i, row in enumerate(r for r in ranked if r.cell(metric.name) is not None):
+        rank = 0
+        for row in (r for r in ranked if r.cell(metric.name) is not None):
             c = row.cell(metric.name)
-            table_rows.append([str(i + 1) if c.complete else "–", f"`{row.label}`", cell_text(c), _interval(c),
+            rank += 1 if c.complete and not row.reference else 0
+            shown_rank = "ref." if row.reference else (str(rank) if c.complete else "–")
+            table_rows.append([shown_rank, f"`{row.label}`", cell_text(c), _interval(c),
                                fmt(c.median), fmt(c.worst), str(c.n)])
         lines += _table(["rank", "representation", "mean", f"{view.CONFIDENCE:.0%} interval", "median", "worst",
                          "materials"], table_rows)

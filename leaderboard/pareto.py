@@ -121,7 +121,10 @@ def chart(section: TableSection) -> Chart | None:
         return None
     log = y_log(section)
     n = len(section.materials)
-    hidden = frozenset(k for k, r in enumerate(section.rows) if r.reference)
+    others = any(not r.reference and r.cell(primary.name) is not None and r.cell(primary.name).complete
+                 for r in section.rows)
+    # the references start hidden, unless there is nothing else to plot
+    hidden = frozenset(k for k, r in enumerate(section.rows) if r.reference) if others else frozenset()
     metrics = section.metrics
     panels = []
     for name in AXES:

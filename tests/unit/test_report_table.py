@@ -166,3 +166,21 @@ def test_the_heat_map_is_on_the_page_with_its_colour_scale():
     page = html.render(frame(), "store.sqlite")
     assert 'id="s0-heatmap"' in page and "linear-gradient" in page and "(better)" in page
     assert page.index('id="s0-heatmap"') > page.index('id="s0-table"')
+
+
+def test_a_store_of_the_reference_alone_ranks_nothing_and_says_so():
+    df = frame(6, CONFIGS[:1])
+    text = markdown.render(df, "s")
+    assert "No configuration to rank beside the reference yet." in text
+    assert "| 1 | `merl`" not in text and "| ref. | `merl`" in text  # nor in the per-metric tables
+    page = html.render(df, "s")
+    assert "No configuration to rank beside the reference yet." in page
+    assert "<tr><td>1</td>" not in page and "<tr><td>ref.</td>" in page
+
+
+def test_the_reference_alone_is_plotted_rather_than_an_empty_chart():
+    from brdfbench_leaderboard import pareto
+
+    alone = pareto.chart(section(frame(6, CONFIGS[:1])))
+    assert alone is not None and not alone.hidden
+    assert pareto.chart(section(frame(6))).hidden  # beside other configurations it starts hidden
