@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from . import chart_html, drilldown, drilldown_html, figures_html, generation_render, main_table, published_render, view
+from . import (chart_html, drilldown, drilldown_html, figures_html, generation_render, machines, main_table,
+               published_render, view)
 from . import plots as plots_module
 from .html_parts import CONTENDED, ON_GPU, anchor, assets, esc, number, svg, th
 from .html_parts import cell as _cell
@@ -270,17 +271,17 @@ def _fill_drilldowns(body: list[str], report: view.Report, drills: dict) -> list
     return out
 
 
-def machine_section(machines: list) -> list[str]:
-    """The machine-speed table (see `view.MachineSpeed`), or nothing for a store without one."""
-    if not machines:
+def machine_section(speeds: list) -> list[str]:
+    """The machine-speed table (see `machines.MachineSpeed`), or nothing for a store without one."""
+    if not speeds:
         return []
     head = "".join(th(t, cls="label") for t in ("host", "CPU", "device")) + "".join(
         th(t) for t in ("threads", "runs", "GFLOP/s ↑ (median)", "slowest run", "fastest run"))
     rows = "".join(f'<tr><td class="label">{esc(m.host)}</td><td class="label">{esc(m.cpu_model)}</td>'
                    f'<td class="label">{esc(m.device)}</td><td>{m.threads}</td><td>{m.runs}</td>'
                    f'<td>{number(m.median)}</td><td>{number(m.low)}</td><td>{number(m.high)}</td></tr>'
-                   for m in machines)
-    return ['<h2 id="machine-speed">Machine speed</h2>', f'<p class="note">{esc(view.MACHINE_NOTE)}</p>',
+                   for m in speeds)
+    return ['<h2 id="machine-speed">Machine speed</h2>', f'<p class="note">{esc(machines.MACHINE_NOTE)}</p>',
             f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table></div>']
 
 

@@ -7,7 +7,7 @@ from collections.abc import Collection
 import pandas as pd
 
 from . import plots as plots_module
-from . import view
+from . import machines, view
 from .published_markdown import published_markdown
 from .units import fmt
 from .view import Cell, ConvergenceSection, Metric, TableSection
@@ -202,7 +202,7 @@ def render_view(report: view.Report, plots: Collection[str] = ()) -> str:
 
 
 def host_lines(hosts: list) -> list[str]:
-    """One line per machine that produced figures (`view.Host`)."""
+    """One line per machine that produced figures (`machines.Host`)."""
     out = []
     for h in hosts:
         soft = h.platform or "platform not recorded"
@@ -213,14 +213,14 @@ def host_lines(hosts: list) -> list[str]:
     return out
 
 
-def machine_section(machines: list) -> list[str]:
-    """The machine-speed table (see `view.MachineSpeed`), or nothing for a store without one."""
-    if not machines:
+def machine_section(speeds: list) -> list[str]:
+    """The machine-speed table (see `machines.MachineSpeed`), or nothing for a store without one."""
+    if not speeds:
         return []
-    lines = ["## Machine speed", "", view.MACHINE_NOTE, ""]
+    lines = ["## Machine speed", "", machines.MACHINE_NOTE, ""]
     lines += _table(["host", "CPU", "device", "threads", "runs", "GFLOP/s ↑ (median)", "slowest run", "fastest run"],
                     [[m.host, m.cpu_model, m.device, str(m.threads), str(m.runs), fmt(m.median), fmt(m.low), fmt(m.high)]
-                     for m in machines])
+                     for m in speeds])
     return lines + [""]
 
 

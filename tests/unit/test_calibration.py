@@ -7,7 +7,7 @@ import math
 import pandas as pd
 
 from brdfbench.pipeline import calibration
-from leaderboard import markdown, view
+from leaderboard import machines, markdown
 
 
 def test_the_product_is_timed_as_a_positive_speed():
@@ -24,7 +24,7 @@ def _rows(values, host="a", threads=2):
 def test_speeds_are_summarised_per_host_and_thread_count_over_runs():
     df = pd.DataFrame(_rows([("r1", 100.0), ("r1", 110.0), ("r2", 50.0), ("r3", 80.0)])
                       + _rows([("r4", 30.0)], threads=1) + _rows([("r5", 7.0)], host="b"))
-    speeds = {(m.host, m.threads): m for m in view.machine_speeds(df)}
+    speeds = {(m.host, m.threads): m for m in machines.machine_speeds(df)}
     a2 = speeds[("a", 2)]
     assert (a2.runs, a2.median, a2.low, a2.high) == (3, 80.0, 50.0, 105.0)  # run r1: the median of its cells
     assert speeds[("a", 1)].runs == 1 and speeds[("b", 2)].median == 7.0
