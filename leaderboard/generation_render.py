@@ -8,7 +8,7 @@ from pathlib import Path
 
 from . import svg_plot
 from .generation_view import DrawCell, GenerationSection, GenRow
-from .markdown import fmt
+from .units import fmt
 
 INTRO = ("Each generator is trained on the dataset's training split; each of its {draws} independent sample draws "
          "is scored against the held-out test split ({ref} materials) as a set. A figure is the mean over the draws "

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 
 from . import tables
-from .view import Failure
+from .tables import Failure
 
 #: Table 1's column order, by generator plugin; others follow by label.
 PLUGIN_ORDER = ("training_set", "pca_brdf", "pca_nbrdf", "vae_brdf", "vae_nbrdf", "hyperdiffusion")

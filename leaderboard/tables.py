@@ -8,11 +8,21 @@ each gets the parameters in which they differ: `nbrdf (hidden=[8, 8])`.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from typing import Any
 
 import pandas as pd
 
 from brdfbench.harness.lobes import TARGET_HALF_WIDTH
+
+@dataclass(frozen=True)
+class Failure:
+    """A cell that failed and has not succeeded since: who, on what, and why."""
+
+    label: str
+    material: str
+    message: str
+
 
 #: Columns shown beside accuracy, with the aggregate that makes sense for each: costs, and a
 #: model's own final fit loss (each family's own objective: not comparable across families,

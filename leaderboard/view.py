@@ -26,6 +26,7 @@ from brdfbench.pipeline import calibration
 
 from . import tables, units
 from .machines import hosts, machine_speeds
+from .tables import Failure
 
 BOOTSTRAP_RESAMPLES = 2000
 CONFIDENCE = 0.95
@@ -156,13 +157,6 @@ class Split:
     rest: int
     metrics: list[Metric]
     cells: dict[tuple[str, str, bool], Cell]  # (config hash, metric, sharpest?) → cell
-
-
-@dataclass(frozen=True)
-class Failure:
-    label: str
-    material: str
-    message: str
 
 
 @dataclass(frozen=True)
