@@ -134,10 +134,10 @@ def _published() -> dict[tuple[str, str], float]:
     """(paper model, paper metric) → the printed figure of Hu 2026, Table 4.5."""
     from brdfbench import citations
 
-    from . import published
+    from . import published_data
 
     out = {}
-    for p in published.figures():
+    for p in published_data.figures():
         if citations.source(p.source) == PAPER_SOURCE and p.table.startswith(PAPER_TABLE):
             out[(p.model, p.metric)] = p.value
     return out

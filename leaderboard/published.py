@@ -28,17 +28,14 @@ Table 2".
 
 from __future__ import annotations
 
-import csv
 import math
-import re
 from dataclasses import dataclass
-from decimal import Decimal, InvalidOperation
-from importlib import resources
 from typing import TYPE_CHECKING
 
 from brdfbench import citations
 
 from . import units
+from .published_data import FIGURES_FILE, Match, Published, citation, figures, matches
 
 if TYPE_CHECKING:  # the view's types, for annotations only (no import cycle through the view)
     from .view import Cell, Metric, Report, TableSection
@@ -47,8 +44,6 @@ AGREEMENT_FACTOR = 2.0
 #: Configurations (conf/) that train on a source paper's own recipe rather than this
 #: project's CPU schedule: the report says which produced each of our figures.
 PUBLISHED_RECIPES = ("nbrdf_reference", "triplane_gated_paper", "tripleplane_paper", "hyperdiffusion_paper")
-FIGURES_FILE = "seed_figures.csv"
-MATCHES_FILE = "published_matches.csv"
 
 AGREES = "agrees"
 DIFFERS = "does not reproduce"
@@ -73,44 +68,6 @@ KILOBYTE: dict[str, tuple[int, str]] = {
 #: networks of MERL/RGL materials), with how a verdict names them. Any other set (the synthetic
 #: default, AugMERL mixes) is not the papers' materials.
 MEASURED_DATASETS = {"merl_folder": "MERL", "nbrdf_release": "NBRDF-release"}
-
-
-@dataclass(frozen=True)
-class Published:
-    source: str
-    table: str
-    model: str
-    metric: str
-    value: float
-    std: float | None
-    unit: str
-    note: str
-    printed: str = ""  # the figure as printed, its digits kept ("2.70"): it stands for ±half its last digit
-
-    @property
-    def half_step(self) -> float:
-        """Half a unit of the last printed digit (0 where the printed text is not known)."""
-        try:
-            exponent = Decimal(self.printed.strip()).as_tuple().exponent
-        except (InvalidOperation, AttributeError):
-            return 0.0
-        return 0.5 * 10.0 ** exponent if isinstance(exponent, int) else 0.0
-
-
-@dataclass(frozen=True)
-class Match:
-    seed: str
-    table: str
-    model: str
-    metric: str
-    representation: str
-    our_metric: str
-    scene: str
-    scale: float
-    setup: str
-    dataset: str = ""  # the paper's materials ("30 MERL/RGL"); "" where the figure does not depend on them
-    paper_recipe: str = ""  # how the paper trains the model; "" where it has no training schedule
-    recipe_configs: tuple[str, ...] = ()  # our configurations that train on that recipe
 
 
 @dataclass(frozen=True)
@@ -141,55 +98,6 @@ class Comparison:
 
 def not_comparable(kinds: tuple[str, ...]) -> str:
     return f"not comparable ({', '.join(kinds)})"
-
-
-def _rows(name: str) -> list[dict[str, str]]:
-    text = resources.files("brdfbench_leaderboard").joinpath("data", name).read_text(encoding="utf-8")
-    return list(csv.DictReader(text.splitlines()))
-
-
-#: Where in its paper a figure is printed: "Table 4.1 image quality ..." → ("Table 4.1", "image
-#: quality ..."); "section 3.1" and "text 4.3.2.2 efficiency" → "§3.1", "§4.3.2.2".
-_WHERE = re.compile(r"(Table|Figure|section|text)\s+(\d+(?:\.\d+)*)\s*(.*)", re.DOTALL)
-
-
-def citation(source: str, table: str) -> tuple[str, str]:
-    """(where, what): a figure's source and table as a report shows them: the paper's citation
-    and the place in it ("Sztrajman et al. 2021, Table 2"), and the table's description
-    (any internal label in it cited too)."""
-    m = _WHERE.fullmatch(table.strip())
-    if m is None:
-        return citations.source(source), citations.cite(table)
-    kind, number, rest = m.groups()
-    place = f"§{number}" if kind in ("section", "text") else f"{kind} {number}"
-    return f"{citations.source(source)}, {place}", citations.cite(rest)
-
-
-def _float(text: str | None) -> float | None:
-    try:
-        value = float(text) if text not in (None, "") else None
-    except ValueError:
-        return None
-    return value if value is None or math.isfinite(value) else None
-
-
-def figures() -> list[Published]:
-    """The numeric published figures (a range printed as text, e.g. "10 to 180", is left out)."""
-    out = []
-    for r in _rows(FIGURES_FILE):
-        value = _float(r.get("value"))
-        if value is None:
-            continue
-        out.append(Published(r["source"], r["table"], r["model"], r["metric"], value, _float(r.get("std")),
-                             r.get("unit") or "", r.get("note") or "", (r.get("value") or "").strip()))
-    return out
-
-
-def matches() -> list[Match]:
-    return [Match(r["seed"], r["table"], r["model"], r["metric"], r["representation"], r["our_metric"], r["scene"],
-                  float(r["scale"]), r["setup"], (r.get("dataset") or "").strip(),
-                  (r.get("paper_recipe") or "").strip(), tuple((r.get("recipe_configs") or "").split()))
-            for r in _rows(MATCHES_FILE)]
 
 
 def find(match: Match, published: list[Published]) -> Published | None:

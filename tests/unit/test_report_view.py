@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from scipy import stats
 
 from brdfbench import citations
-from brdfbench_leaderboard import html, lobe_svg, markdown, pareto, published, view
+from brdfbench_leaderboard import html, lobe_svg, markdown, pareto, published, published_data, view
 
 ALPHA = 0.01  # significance level of the statistical checks here
 
@@ -161,7 +161,7 @@ def test_unreadable_published_data_is_said_not_raised(monkeypatch):
     def broken(name):
         raise OSError(f"{name}: no such file")
 
-    monkeypatch.setattr(published, "_rows", broken)
+    monkeypatch.setattr(published_data, "_rows", broken)
     page = html.render(_frame(), "s")
     assert "could not be read" in page and "seed_figures.csv" in page
 
