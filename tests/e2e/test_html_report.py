@@ -10,13 +10,11 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 from pathlib import Path
 
 import pytest
 
 QUICK = ["dataset.params.size=small", "harness=quick", "limit=2"]
-CHROMIUM = ("chromium", "chromium-browser", "google-chrome")
 
 
 @pytest.fixture(scope="module")
@@ -34,35 +32,9 @@ def results(tmp_path_factory, cli_session) -> Path:
 
 
 @pytest.fixture(scope="module")
-def browser():
-    try:
-        from selenium import webdriver
-        from selenium.common.exceptions import WebDriverException
-        from selenium.webdriver.chrome.service import Service
-    except ImportError as exc:  # the test extras were not installed
-        pytest.skip(f"selenium is not installed ({exc}); `bash setup.sh` installs it")
-    binary = next((shutil.which(b) for b in CHROMIUM if shutil.which(b)), None)
-    driver_path = shutil.which("chromedriver")
-    if binary is None or driver_path is None:
-        pytest.skip("headless Chromium and chromium-driver are not installed (Debian: apt-get install chromium "
-                    "chromium-driver; setup.sh does it)")
-    options = webdriver.ChromeOptions()
-    options.binary_location = binary
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1400,1000"):
-        options.add_argument(arg)
-    options.set_capability("goog:loggingPrefs", {"browser": "ALL", "performance": "ALL"})
-    try:
-        driver = webdriver.Chrome(service=Service(driver_path), options=options)
-    except WebDriverException as exc:
-        pytest.skip(f"Chromium cannot start here: {str(exc).splitlines()[0]}")
-    yield driver
-    driver.quit()
-
-
-@pytest.fixture(scope="module")
-def page(browser, results):
-    browser.get((results / "leaderboard.html").as_uri())
-    return browser
+def page(chromium, results):
+    chromium.get((results / "leaderboard.html").as_uri())
+    return chromium
 
 
 def test_a_run_writes_the_page_beside_the_markdown(results):

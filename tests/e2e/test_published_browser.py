@@ -4,12 +4,11 @@ its box. The page is written from a small store with the rows a default run comp
 (neural models, analytic fits, the table, a rendered scene), so the long setup and reason
 texts are there to push the columns.
 
-Skipped, saying why, only where Chromium or its driver cannot start.
+Skipped, saying why, only where Chromium or its driver cannot start (tests/e2e/conftest.py).
 """
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import pytest
@@ -17,7 +16,6 @@ import pytest
 from brdfbench.report import write_reports
 from brdfbench.store import ConfigRecord, ResultsStore, Row
 
-CHROMIUM = ("chromium", "chromium-browser", "google-chrome")
 WIDTH, HEIGHT = 1400, 1000
 #: label → (plugin, {metric: (value, unit, higher is better)}) in BRDF space
 ACCURACY = {
@@ -58,35 +56,10 @@ def _write(root: Path) -> Path:
 
 
 @pytest.fixture(scope="module")
-def browser():
-    try:
-        from selenium import webdriver
-        from selenium.common.exceptions import WebDriverException
-        from selenium.webdriver.chrome.service import Service
-    except ImportError as exc:  # the test extras were not installed
-        pytest.skip(f"selenium is not installed ({exc}); `bash setup.sh` installs it")
-    binary = next((shutil.which(b) for b in CHROMIUM if shutil.which(b)), None)
-    driver_path = shutil.which("chromedriver")
-    if binary is None or driver_path is None:
-        pytest.skip("headless Chromium and chromium-driver are not installed (Debian: apt-get install chromium "
-                    "chromium-driver; setup.sh does it)")
-    options = webdriver.ChromeOptions()
-    options.binary_location = binary
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                f"--window-size={WIDTH},{HEIGHT}"):
-        options.add_argument(arg)
-    try:
-        driver = webdriver.Chrome(service=Service(driver_path), options=options)
-    except WebDriverException as exc:
-        pytest.skip(f"Chromium cannot start here: {str(exc).splitlines()[0]}")
-    yield driver
-    driver.quit()
-
-
-@pytest.fixture(scope="module")
-def page(browser, tmp_path_factory):
-    browser.get(_write(tmp_path_factory.mktemp("published")).as_uri())
-    return browser
+def page(chromium, tmp_path_factory):
+    chromium.viewport(WIDTH, HEIGHT)
+    chromium.get(_write(tmp_path_factory.mktemp("published")).as_uri())
+    return chromium
 
 
 #: The published table's verdict cells (header included): their right edges, the viewport's
