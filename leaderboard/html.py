@@ -233,8 +233,9 @@ def provenance(report: view.Report) -> list[str]:
         items.append(f"<dt>Machine</dt><dd><b>{esc(h.host)}</b>: {esc(h.cpu_model or 'CPU model not recorded')}, "
                      f"{h.cores} cores, {h.threads} threads, {esc(gpu)}; {esc(soft)} "
                      f'<span class="meta">({h.cells} rows)</span></dd>')
+    speed = ' (<a href="#machine-speed">machine speed</a>)' if report.machines else ""
     items.append("<dt>Timings</dt><dd>from the machine that ran each cell: compare them between cells of one "
-                 'machine (<a href="#machine-speed">machine speed</a>)</dd>')
+                 f"machine{speed}</dd>")
     return [f'<dl class="provenance">{"".join(items)}</dl>']
 
 

@@ -184,3 +184,10 @@ def test_the_reference_alone_is_plotted_rather_than_an_empty_chart():
     alone = pareto.chart(section(frame(6, CONFIGS[:1])))
     assert alone is not None and not alone.hidden
     assert pareto.chart(section(frame(6))).hidden  # beside other configurations it starts hidden
+
+
+def test_every_link_of_the_page_has_its_target():
+    page = html.render(frame(), "s")  # no calibration rows: no machine-speed table to link to
+    ids = set(re.findall(r'\bid="([^"]+)"', page))
+    targets = set(re.findall(r'href="#([^"]+)"', page))
+    assert targets and targets <= ids, targets - ids
