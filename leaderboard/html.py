@@ -88,7 +88,7 @@ def table_section(s: TableSection, sid: str, results_dir: Path | None = None) ->
 def _per_metric(s: TableSection, sid: str) -> list[str]:
     out = ["<details><summary>Per metric: mean, interval, median, worst case</summary>"]
     for m in s.accuracy:
-        rows = []
+        rows: dict[bool, list[str]] = {True: [], False: []}  # the reference's apart: sorting never moves it
         rank = 0
         for row in s.ranking(m.name):
             c = row.cell(m.name)
@@ -96,14 +96,17 @@ def _per_metric(s: TableSection, sid: str) -> list[str]:
                 continue
             rank += 1 if c.complete and not row.reference else 0
             shown = "ref." if row.reference else (rank if c.complete else "–")
-            rows.append(f'<tr><td>{shown}</td><td class="label"><code>{esc(row.label)}</code></td>'
-                        f'{_cell(c, m)}<td data-sort="{number(c.median)}">{fmt(c.median)}</td>'
-                        f'<td data-sort="{number(c.worst)}">{fmt(c.worst)}</td><td>{c.n}</td></tr>')
+            rows[row.reference].append(
+                f'<tr><td>{shown}</td><td class="label"><code>{esc(row.label)}</code></td>'
+                f'{_cell(c, m)}<td data-sort="{number(c.median)}">{fmt(c.median)}</td>'
+                f'<td data-sort="{number(c.worst)}">{fmt(c.worst)}</td><td>{c.n}</td></tr>')
+        bodies = (f'<tbody class="reference">{"".join(rows[True])}</tbody>' if rows[True] else "") + \
+            f'<tbody>{"".join(rows[False])}</tbody>'
         out += [f"<h3><code>{esc(m.name)}</code> ({esc(m.unit or 'unitless')}, "
                 f"{'higher' if m.higher_is_better else 'lower'} is better)</h3>",
                 f'<table class="sortable" id="{sid}-{esc(m.name)}"><thead><tr>{th("rank")}'
                 f'{th("representation", cls="label")}{th("mean")}{th("median")}{th("worst")}{th("materials")}'
-                f"</tr></thead><tbody>{''.join(rows)}</tbody></table>"]
+                f"</tr></thead>{bodies}</table>"]
     return out + ["</details>"]
 
 

@@ -96,3 +96,12 @@ def test_the_heat_map_colours_every_ranked_figure_hardest_first(page):
     colours = {c.value_of_css_property("background-color") for c in coloured}
     assert len(colours) > 6  # a scale, not one colour
     assert not table.find_elements("css selector", "td.heat-ref[style]")  # the reference is not coloured
+
+
+def test_the_per_metric_tables_keep_the_reference_apart_too(page):
+    page.execute_script("document.querySelectorAll('details').forEach(d => d.open = true)")
+    head = page.find_element("css selector", "#s0-l1_log_cos thead th:nth-child(3)")
+    for _ in range(2):
+        head.click()
+        first = page.find_element("css selector", "#s0-l1_log_cos tbody tr")
+        assert first.find_element("css selector", "td").text == "ref." and "merl" in first.text
