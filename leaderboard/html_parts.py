@@ -7,6 +7,7 @@ import html
 import io
 from importlib import resources
 
+from . import units
 from .units import fmt
 from .view import Cell, Metric
 
@@ -46,20 +47,31 @@ def number(value: float | None) -> str:
     return "" if value is None else repr(float(value))
 
 
-def cell(c: Cell | None, metric: Metric, best: bool = False) -> str:
+def cell(c: Cell | None, metric: Metric, best: bool = False, extra: bool = False, note: str = "") -> str:
+    """A table cell of the view: the figure as `metric.show` prints it, the interval (or
+    `note`) below, median and worst case in the tooltip (with the exact figure where the
+    printed one is in scaled units); `extra`: a column the compact view hides."""
+    cls = ["extra"] if extra else []
     if c is None:
-        return '<td class="missing" data-sort="" title="no figure">–</td>'
+        return f'<td class="{" ".join(["missing", *cls])}" data-sort="" title="no figure">–</td>'
     mark = (CONTENDED if metric.timed and c.contended else "") + (ON_GPU if metric.timed and c.accelerator else "")
-    detail = f"median {fmt(c.median)}, worst {fmt(c.worst)}, {c.n}/{c.expected} materials"
+    detail = f"median {metric.show(c.median)}, worst {metric.show(c.worst)}, {c.n}/{c.expected} materials"
+    if c.complete and metric.kind == "cost" and units.scales(metric.unit):
+        detail = f"{fmt(c.value)} {metric.unit}; {detail}"
     if metric.timed and c.accelerator:
         detail += f"; measured on a GPU ({c.accelerator})"
     if not c.complete:
-        partial = f"partial {metric.aggregate} {fmt(c.partial)} over {c.n}/{c.expected} materials"
-        return (f'<td class="missing" data-sort="" title="{esc(partial)}">–'
+        partial = f"partial {metric.aggregate} {metric.show(c.partial)} over {c.n}/{c.expected} materials"
+        return (f'<td class="{" ".join(["missing", *cls])}" data-sort="" title="{esc(partial)}">–'
                 f'<span class="ci">{c.missing} missing</span></td>')
-    ci = f'<span class="ci">[{fmt(c.lo)}, {fmt(c.hi)}]</span>' if c.lo is not None else ""
-    cls = ' class="best"' if best else ""
-    return f'<td{cls} data-sort="{number(c.value)}" title="{esc(detail)}">{esc(fmt(c.value) + mark)}{ci}</td>'
+    below = f"[{fmt(c.lo)}, {fmt(c.hi)}]" if c.lo is not None else note
+    ci = f'<span class="ci">{esc(below)}</span>' if below else ""
+    if best:
+        cls.append("best")
+        detail += "; best of the configurations with a figure"
+    attr = f' class="{" ".join(cls)}"' if cls else ""
+    return (f'<td{attr} data-sort="{number(c.value)}" title="{esc(detail)}">'
+            f"{esc(metric.show(c.value) + mark)}{ci}</td>")
 
 
 def span(text: str) -> str:

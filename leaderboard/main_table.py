@@ -11,16 +11,11 @@ its own row group above the ranking, which sorting never moves.
 from __future__ import annotations
 
 from . import units, view
-from .html_parts import CONTENDED, ON_GPU, esc, number
-from .units import fmt
-from .view import Cell, Metric, Row, TableSection
+from .html_parts import cell, esc
+from .view import Metric, Row, TableSection
 
 #: Costs the compact view shows beside the ranking metric (where the section has them).
 COMPACT_COSTS = ("fit_time", "evals_per_s", "render_time", "render_samples_per_s", "model_bytes")
-
-
-def label(metric: Metric) -> str:
-    return metric.short_label
 
 
 def direction(metric: Metric) -> str:
@@ -39,36 +34,8 @@ def header(metric: Metric, extra: bool) -> str:
     unit = "" if units.scales(metric.unit) else (metric.unit or "unitless")
     sub = " · ".join(x for x in (unit, direction(metric)) if x)
     cls = ' class="extra"' if extra else ""
-    return (f'<th{cls} title="{esc(title)}" data-metric="{esc(metric.name)}">{esc(label(metric))}'
+    return (f'<th{cls} title="{esc(title)}" data-metric="{esc(metric.name)}">{esc(metric.short_label)}'
             f'<span class="ci">{esc(sub)}</span></th>')
-
-
-def figure(value: float | None, metric: Metric) -> str:
-    return metric.show(value)
-
-
-def cell(c: Cell | None, metric: Metric, best: bool = False, extra: bool = False, note: str = "") -> str:
-    cls = ["extra"] if extra else []
-    if c is None:
-        return f'<td class="{" ".join(["missing", *cls])}" data-sort="" title="no figure">–</td>'
-    mark = (CONTENDED if metric.timed and c.contended else "") + (ON_GPU if metric.timed and c.accelerator else "")
-    exact = f"{fmt(c.value)} {metric.unit}".strip() if c.complete else ""
-    detail = f"median {figure(c.median, metric)}, worst {figure(c.worst, metric)}, {c.n}/{c.expected} materials"
-    if exact and metric.kind == "cost":
-        detail = f"{exact}; {detail}"
-    if metric.timed and c.accelerator:
-        detail += f"; measured on a GPU ({c.accelerator})"
-    if not c.complete:
-        partial = f"partial {metric.aggregate} {figure(c.partial, metric)} over {c.n}/{c.expected} materials"
-        return (f'<td class="{" ".join(["missing", *cls])}" data-sort="" title="{esc(partial)}">–'
-                f'<span class="ci">{c.missing} missing</span></td>')
-    below = f"[{fmt(c.lo)}, {fmt(c.hi)}]" if c.lo is not None else note
-    ci = f'<span class="ci">{esc(below)}</span>' if below else ""
-    if best:
-        cls.append("best")
-        detail += "; best of the configurations with a figure"
-    attr = f' class="{" ".join(cls)}"' if cls else ""
-    return f'<td{attr} data-sort="{number(c.value)}" title="{esc(detail)}">{esc(figure(c.value, metric) + mark)}{ci}</td>'
 
 
 def _shared_note(row: Row, s: TableSection) -> str:
@@ -116,7 +83,7 @@ def table(s: TableSection, sid: str, best: dict[str, str | None]) -> list[str]:
     bodies += f'<tbody class="ranked">{"".join(groups[False])}</tbody>'
     toggle = (f'<input type="checkbox" class="columns-toggle" id="{sid}-all-columns">'
               f'<label class="columns-toggle" for="{sid}-all-columns">show all {len(metrics) + 3} columns '
-              f"({len(hidden)} more: {esc(', '.join(label(m) for m in metrics if m.name in hidden))})</label>"
+              f"({len(hidden)} more: {esc(', '.join(m.short_label for m in metrics if m.name in hidden))})</label>"
               if hidden else "")
     return [f'<div class="main-table">{toggle}<div class="scroll"><table class="sortable main" id="{sid}-table" '
             f'data-compact="{len(compact) + 3}"><thead><tr>{"".join(head)}</tr></thead>{bodies}</table></div></div>']

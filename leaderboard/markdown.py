@@ -7,7 +7,7 @@ from collections.abc import Collection
 import pandas as pd
 
 from . import plots as plots_module
-from . import machines, view
+from . import drilldown, machines, view
 from .published_markdown import published_markdown
 from .units import fmt
 from .view import Cell, ConvergenceSection, Metric, TableSection
@@ -128,8 +128,6 @@ def table_section(s: TableSection) -> list[str]:
 
 def _hardest(s: TableSection) -> list[str]:
     """The per-material drill-down in one paragraph (the HTML page has its heat map)."""
-    from . import drilldown
-
     d = drilldown.build(s)
     return [] if d is None else [drilldown.summary(d), ""]
 
