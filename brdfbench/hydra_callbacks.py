@@ -176,6 +176,7 @@ class SweepCallback(Callback):
         try:  # the sweep's own keys: one line, not one per job
             parallelism.count("workers", config.get("workers", "auto"))
             parallelism.count("threads", config.get("threads", "auto"))
+            parallelism.count("fit_workers", config.get("fit_workers", "auto"))
         except BrdfbenchError as exc:
             print(f"brdfbench: error: {exc}", file=sys.stderr, flush=True)
             raise SystemExit(2) from None

@@ -21,7 +21,8 @@ IN_PROCESS: list[dict[str, Any]] = []
 #: Top-level keys of config.yaml besides the groups; anything else is a typo.
 TOP_LEVEL = {"representation", "generator", "dataset", "harness", "scene", "seed", "materials", "limit", "results_dir",
              "save_models",
-             "isolate", "progress", "store", "store_params", "device", "workers", "threads"}
+             "isolate", "progress", "store", "store_params", "device", "workers", "threads",
+             "fit_workers"}
 
 
 def _section(cfg: DictConfig, key: str) -> dict:
@@ -112,6 +113,7 @@ def to_run_config(cfg: DictConfig, job: str = "") -> RunConfig:
         progress=_value(cfg, "progress", "auto"),
         device=_value(cfg, "device", "auto"),
         threads=_threads(cfg),
+        fit_workers=parallelism.fit_workers(_value(cfg, "workers", "auto"), _value(cfg, "fit_workers", "auto")),
         launcher=_launcher(choices),
         job=job,
     )

@@ -1,11 +1,16 @@
-"""How many jobs of a sweep run at once, and on how many threads each (the run-control keys
-`workers` and `threads`).
+"""How many jobs of a sweep run at once, on how many threads each, and how many materials a
+job fits at once (the run-control keys `workers`, `threads` and `fit_workers`).
 
 `threads: auto` leaves a lone job torch's default (every core); `workers: auto` runs one
 job at a time below `PARALLEL_FROM_CORES` cores (two cores are better spent on one job's
 threads than split: its timings stay uncontended), else `cores // THREADS_PER_WORKER` jobs
 at once, each on `cores // workers` threads. `workers=1` gives exclusive timings on any
 machine. A value outside 1 … cores is a ConfigError naming the key and the range.
+
+`fit_workers: auto` fits the materials of a job whose representation fits on one thread
+(`Representation.fits_in_parallel`) in as many single-threaded processes as the job has
+threads, one material each at a time; `workers=1` (exclusive timings) makes that one too,
+unless `fit_workers` is given.
 """
 
 from __future__ import annotations
@@ -46,3 +51,17 @@ def resolve(workers, threads, jobs: int, cores: int | None = None) -> tuple[int,
     if t is None and w > 1:
         t = max(1, cores // w)
     return w, t
+
+
+def fit_workers(workers, value, cores: int | None = None) -> int | None:
+    """The `fit_workers` count of a job (None: auto, the job's threads), checked against the
+    cores; `workers=1` with `fit_workers: auto` is 1, so that exclusive timings stay exclusive."""
+    n = count("fit_workers", value, cores)
+    if n is None and count("workers", workers, cores) == 1:
+        return 1
+    return n
+
+
+def fit_processes(fit_workers: int | None, threads: int) -> int:
+    """How many single-threaded fits a job on `threads` torch threads runs at once."""
+    return max(1, fit_workers if fit_workers is not None else threads)

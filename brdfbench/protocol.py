@@ -79,6 +79,11 @@ class Representation(Placed, ABC):
         """Fit to a measured material; returns self."""
 
     # -- fitting many materials at once --------------------------------------------
+    #: True where `fit` runs on one thread (or holds the GIL) and the class and its params
+    #: pickle: the runner may then fit several materials side by side, one per process
+    #: (run control `fit_workers`), each from `torch.manual_seed(seed)`: the same models.
+    fits_in_parallel: ClassVar[bool] = False
+
     @property
     def fit_batch_size(self) -> int:
         """How many materials the runner passes to one `fit_many` call (1: one at a time)."""

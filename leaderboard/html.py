@@ -54,7 +54,8 @@ def table_section(s: TableSection, sid: str, results_dir: Path | None = None) ->
             f'<p class="note">Ranked by mean <code>{esc(s.primary.name)}</code> over materials; below each mean its '
             f"{view.CONFIDENCE:.0%} bootstrap interval over materials ({view.BOOTSTRAP_RESAMPLES} resamples; none with "
             f"fewer than {view.MIN_INTERVAL_N} materials). Fit time is the mean per material (amortised over the "
-            "materials fitted together, for batched fitters); evals/s and bytes the median; bytes per material "
+            "materials fitted together, for batched fitters, and over the fits run side by side, one per process, "
+            "for single-threaded ones); evals/s and bytes the median; bytes per material "
             "leave out a part shared by every material, shown below them. A configuration without a figure for "
             "every material has no mean (its partial one is in the cell's tooltip) and is not ranked"
             + ("; the reference row, the target scored against itself, is shown above the ranking and never "

@@ -73,7 +73,8 @@ def table_section(s: TableSection) -> list[str]:
         "### Accuracy and its cost",
         "",
         f"Ranked by mean `{s.primary.name}` over materials. Accuracy columns are means over materials; fit time is "
-        "the mean per material (amortised over the materials fitted together, for batched fitters), evals/s and "
+        "the mean per material (amortised over the materials fitted together, for batched fitters, and over the fits "
+        "run side by side, one per process, for single-threaded ones), evals/s and "
         "bytes the median. Representations that train on a split (train time, "
         "shared bytes) are cross-validated: each material is scored by a model trained without it. "
         "↓ lower is better, ↑ higher is better. A configuration without a figure for every material has no mean "

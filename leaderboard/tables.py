@@ -31,6 +31,7 @@ COST_METRICS = {
     "fit_loss": "mean",
     "fit_time": "mean",
     "fit_batch": "median",
+    "fit_workers": "median",
     "train_time": "mean",
     "evals_per_s": "median",
     "model_bytes": "median",

@@ -39,6 +39,7 @@ COST_LABELS = {
     "fit_loss": "own fit loss",
     "fit_time": "fit time (s)",
     "fit_batch": "materials per fit",
+    "fit_workers": "fits side by side",
     "train_time": "train time (s)",
     "evals_per_s": "evals/s",
     "model_bytes": "bytes/material",
@@ -51,7 +52,7 @@ COST_LABELS = {
     "peak_rss_train": "peak memory, train (B)",
 }
 #: Costs without a better direction of their own (a count, a family's own objective).
-UNDIRECTED = ("fit_loss", "fit_batch")
+UNDIRECTED = ("fit_loss", "fit_batch", "fit_workers")
 
 
 @dataclass(frozen=True)

@@ -66,6 +66,9 @@ class AnalyticBRDF(Representation):
     """
 
     tags: ClassVar[frozenset[str]] = TAGS
+    #: the fit runs on one torch thread with scipy's L-BFGS loop holding the GIL: the runner
+    #: fits several materials side by side, one per process
+    fits_in_parallel: ClassVar[bool] = True
     #: evaluates on a GPU; the fit (bounded L-BFGS-B through scipy on 2^15 cells) runs on the
     #: CPU wherever the model is, and its coefficients then move to the model's device
     devices = frozenset({"cpu", "cuda"})

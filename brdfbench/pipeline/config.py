@@ -66,6 +66,8 @@ class RunConfig:
     launcher: str = "basic"  # the Hydra launcher that started the job (recorded with every figure)
     device: str = "auto"  # where torch work runs: auto | cpu | cuda | cuda:N (see brdfbench.device)
     threads: int | None = field(default=None, metadata={"min": 1})  # torch threads of the job (None: torch's default)
+    # single-threaded fits the job runs at once (None: its threads), see brdfbench.parallelism
+    fit_workers: int | None = field(default=None, metadata={"min": 1})
     job: str = ""  # the job's number in a sweep, for progress lines
     # a generation job's generator (harness=generation); "" for jobs that measure representations
     generator: str = ""

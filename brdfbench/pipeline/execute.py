@@ -29,10 +29,10 @@ from ..errors import BrdfbenchError, ConfigError, DataError, RenderError, os_err
 from ..harness import HarnessContext, Measurement
 from ..harness.cost import model_size
 from ..protocol import FIT_LOSS_KEY
-from . import calibration
+from . import calibration, fit_pool
 from .config import RunConfig
 from .memory import peak_rss, reset_peak
-from .plan import Checked, Task, check, config_hash, hashed_config
+from .plan import Checked, Task, check, config_hash, hashed_config, parallel_fits
 from .progress import mode as progress_mode
 
 log = logging.getLogger(__name__)
@@ -88,7 +88,7 @@ def _fault(exc: Exception, device: torch.device = devices.CPU) -> str:
         if device.type == "cuda":
             torch.cuda.empty_cache()
         return message
-    if isinstance(exc, (RenderError, NonFinite)):
+    if isinstance(exc, (RenderError, NonFinite, fit_pool.HelperDied)):
         return str(exc)
     if isinstance(exc, ConfigError):  # the plugin cannot run so (e.g. too few materials): its cells fail, the sweep goes on
         return str(exc)
@@ -141,6 +141,19 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
     note = f"fitting {job.label} to {len(chunk)} materials at once" if len(chunk) > 1 else None
     emit(("phase", _limit(job, len(chunk)), f"fitting {job.label} to {', '.join(chunk)}", note))
     busy = concurrency()
+    processes = 1 if trained is not None else min(len(chunk), parallel_fits(job, state.checked.cls, state.device))
+    fit_extra = [Measurement("fit_batch", float(len(chunk)), "materials", False)] if len(chunk) > 1 else []
+    if processes > 1:
+        fitted, fit_s, fit_memory = _fit_side_by_side(job, materials, state, processes)
+        fit_extra.append(Measurement("fit_workers", float(processes), "processes", False))
+        for material, (ok, model) in zip(materials, fitted):
+            if ok:
+                _measure(job, material, model, state, fit_s, fit_extra + fit_memory, extra, emit, busy, concurrency)
+            else:
+                message = _fault(model, state.device)
+                log.warning("%s failed to fit %s: %s", job.label, material.name, message)
+                emit(("cell", material.name, material.category, [], "failed", message, busy))
+        return
     try:
         torch.manual_seed(job.seed)
         reset_peak()
@@ -160,32 +173,52 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
         message = _fault(exc, state.device)
         log.warning("%s failed to fit %s: %s", job.label, ", ".join(chunk), message)
         return _fail_all(emit, dataset, chunk, message)
-    fit_extra = [Measurement("fit_batch", float(len(chunk)), "materials", False)] if len(chunk) > 1 else []
     for material, model in zip(materials, models):
-        emit(("phase", _limit(job), f"{job.label} on {material.name}", None))
-        try:
-            if model.device.type != "cpu" and not state.checked.harness_cls.measures_on_device:
-                model = model.to(devices.CPU)
-            reset_peak()
-            measurements = state.harness.measure(model, material, job.label)
-            measurements += _memory("peak_rss_eval")
-            measurements.append(Measurement("fit_time", fit_s, "s", False))
-            measurements += fit_extra + fit_memory
-            fit_loss = model.metadata().get(FIT_LOSS_KEY)
-            if isinstance(fit_loss, (int, float)):
-                measurements.append(Measurement("fit_loss", float(fit_loss), "objective", False))
-            measurements += extra
-            measurements += model_size(model)
-            _check_finite(measurements, material.name)
-            if job.save_models:
-                modelio.save(model, job.representation,
-                             artifacts.saved_model_path(job.results_dir, dataset.fingerprint, job.label, material.name))
-        except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
-            message = _fault(exc, state.device)
-            log.warning("%s failed on %s: %s", job.label, material.name, message)
-            emit(("cell", material.name, material.category, [], "failed", message, busy))
-        else:
-            emit(("cell", material.name, material.category, measurements, "ok", "", max(busy, concurrency())))
+        _measure(job, material, model, state, fit_s, fit_extra + fit_memory, extra, emit, busy, concurrency)
+
+
+def _fit_side_by_side(job: RunConfig, materials: list, state: JobState, processes: int):
+    """(per material (ok, model or exception), fit seconds amortised over them, the fit's
+    peak memory: the worker's and its helpers' together), fitting `processes` at a time."""
+    fit_pool.ready(type(state.fitter), processes)  # helpers' start-up is not the fit's time
+    reset_peak()
+    t0 = time.perf_counter()
+    fitted, helpers_peak = fit_pool.fit_parallel(state.fitter, materials, job.seed, processes)
+    fit_s = (time.perf_counter() - t0) / len(materials)
+    own = peak_rss()
+    memory = [] if own is None else [Measurement("peak_rss_fit", float(own + helpers_peak), "B", False)]
+    return fitted, fit_s, memory
+
+
+def _measure(job: RunConfig, material, model, state: JobState, fit_s: float, fit_extra: list, extra: list, emit: Emit,
+             busy: int, concurrency: Callable[[], int]) -> None:
+    """Let the harness measure one fitted material and emit its cell (a failed cell where
+    the plugin faults)."""
+    dataset = state.checked.dataset
+    emit(("phase", _limit(job), f"{job.label} on {material.name}", None))
+    try:
+        if model.device.type != "cpu" and not state.checked.harness_cls.measures_on_device:
+            model = model.to(devices.CPU)
+        reset_peak()
+        measurements = state.harness.measure(model, material, job.label)
+        measurements += _memory("peak_rss_eval")
+        measurements.append(Measurement("fit_time", fit_s, "s", False))
+        measurements += fit_extra
+        fit_loss = model.metadata().get(FIT_LOSS_KEY)
+        if isinstance(fit_loss, (int, float)):
+            measurements.append(Measurement("fit_loss", float(fit_loss), "objective", False))
+        measurements += extra
+        measurements += model_size(model)
+        _check_finite(measurements, material.name)
+        if job.save_models:
+            modelio.save(model, job.representation,
+                         artifacts.saved_model_path(job.results_dir, dataset.fingerprint, job.label, material.name))
+    except Exception as exc:  # any plugin fault is recorded, and the sweep goes on
+        message = _fault(exc, state.device)
+        log.warning("%s failed on %s: %s", job.label, material.name, message)
+        emit(("cell", material.name, material.category, [], "failed", message, busy))
+    else:
+        emit(("cell", material.name, material.category, measurements, "ok", "", max(busy, concurrency())))
 
 
 def _execute_sets(job: RunConfig, task: Task, state: JobState, emit: Emit, concurrency: Callable[[], int],

@@ -16,12 +16,25 @@ from typing import Any, Callable
 import torch
 
 from .. import device as devices
-from .. import registry
+from .. import parallelism, registry
 from ..errors import ConfigError
 from ..provenance import config_hash
 from .config import RunConfig, harness_class
 
 log = logging.getLogger(__name__)
+
+
+#: Tasks of a representation fitted side by side hold this many materials per helper process.
+PARALLEL_ROUNDS = 4
+
+
+def parallel_fits(job: RunConfig, cls: type, device: torch.device) -> int:
+    """How many materials of `job` are fitted side by side (1: one after another in the
+    worker): its `fit_workers` (auto: its threads) where `cls.fits_in_parallel` and it fits
+    on the CPU."""
+    if not getattr(cls, "fits_in_parallel", False) or device.type != "cpu" or cls.needs_training:
+        return 1
+    return parallelism.fit_processes(job.fit_workers, job.threads or torch.get_num_threads())
 
 
 @dataclass(frozen=True)
@@ -181,6 +194,9 @@ def make_plan(job: RunConfig, checked: Checked, done_cells: Callable[[str, str, 
         if placed.type != "cpu":  # a plugin may fit more materials at once on a GPU
             probe.to(placed)
         batch = max(1, int(probe.fit_batch_size))
+        processes = parallel_fits(job, checked.cls, placed)
+        if processes > 1:  # a round of side-by-side fits per helper and task
+            batch = max(batch, processes * PARALLEL_ROUNDS)
         tasks = [Task(pending[i:i + batch]) for i in range(0, len(pending), batch)]
     return Plan(job, checked, chash, params, registry.version(job.plugin_group, job.plugin),
                 checked.harness_cls.columns(job.harness, checked.scene), tasks, skipped)

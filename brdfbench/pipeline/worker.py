@@ -336,15 +336,25 @@ def _sync_environment(env: dict[str, str], cwd: str) -> None:
 def _worker_main(conn) -> None:
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the supervisor, which stops us
+    from . import fit_pool
+
+    try:
+        _serve(conn)
+    finally:  # its fit helpers would hold the exit (multiprocessing joins a process's children)
+        fit_pool.shutdown()
+
+
+def _serve(conn) -> None:
+    """Run the tasks the supervisor sends until it sends None or goes away."""
     import torch
 
     from .environment import ActiveMarker
     from .execute import execute, job_state
 
+    marker = ActiveMarker()
     default_threads = torch.get_num_threads()
     conn.send(("threads", default_threads))
     states: dict = {}
-    marker = ActiveMarker()
     while True:
         try:
             envelope = conn.recv()

@@ -282,6 +282,31 @@ def check_device_agreement(ctx: Context) -> None:
         f"the GPU fit scores {on_gpu:.4g} (mean log error on the reference material), the CPU fit {on_cpu:.4g}")
 
 
+@check("fittable")
+def check_fit_in_a_helper(ctx: Context) -> None:
+    """Where the class declares `fits_in_parallel`: its fit in a fresh single-threaded helper
+    process (as the runner makes it, `fit_workers`) evaluates bit for bit as the shared model
+    fitted here, with this process on two torch threads: a fit that depends on the caller's
+    thread count or process state must not declare it."""
+    from ..pipeline import fit_pool
+    from ..threads import torch_threads
+
+    cls = ctx.spec.load()
+    if not getattr(cls, "fits_in_parallel", False):
+        raise unittest.SkipTest(f"{cls.__name__} does not fit side by side (fits_in_parallel is not set)")
+    if cls.needs_training:
+        raise unittest.SkipTest(f"{cls.__name__} trains on a split: its fits are never side by side")
+    with torch_threads(2):
+        here = ctx.fresh().fit(reference_material(), seed=FIT_SEED)
+    [(ok, there)], _ = fit_pool.fit_parallel(ctx.spec.create(**ctx.params), [reference_material()], FIT_SEED, 1)
+    if not ok:
+        raise AssertionError(f"the fit failed in a helper process: {type(there).__name__}: {there}")
+    wi, wo = adversarial_pairs(4096, torch.float64, seed=14)["uniform"]
+    a, b = here.eval(wi, wo), there.eval(wi, wo)
+    assert torch.equal(a, b), (f"the fit in a helper process differs from the fit here by up to "
+                               f"{float((a - b).abs().max()):.3g}: fits_in_parallel would change the figures")
+
+
 @check()
 def check_cost_declared(ctx: Context) -> None:
     nbytes = ctx.model.nbytes

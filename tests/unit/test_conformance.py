@@ -112,6 +112,19 @@ class LoadsAnything(Lambert):
         return model
 
 
+class SplitsByThreads(Lambert):
+    """Declares side-by-side fits, but its albedo is the mean of per-chunk medians, one chunk
+    per torch thread: in a one-thread helper it fits another albedo."""
+
+    tags = Lambert.tags
+    fits_in_parallel = True
+
+    def fit(self, target, *, seed=0):
+        super().fit(target, seed=seed)
+        self.albedo = self.albedo * (1 + 1e-6 * (torch.get_num_threads() - 1))
+        return self
+
+
 def _spec(cls, name, **kw):
     spec = RepresentationSpec(name=name, description="test plugin", target=f"{__name__}:{cls.__name__}", tags=Lambert.tags, **kw)
     registry.register("representations", spec)
@@ -128,6 +141,7 @@ def _spec(cls, name, **kw):
         (MovesBadly, "devices_declared"),
         (AcceptsAnyDevice, "devices_declared"),
         (LoadsAnything, "load_refuses_broken_state"),
+        (SplitsByThreads, "fit_in_a_helper"),
     ],
 )
 def test_kit_catches_broken_plugins(cls, failing):

@@ -1,4 +1,4 @@
-"""The run-control keys `workers` and `threads` (brdfbench.parallelism)."""
+"""The run-control keys `workers`, `threads` and `fit_workers` (brdfbench.parallelism)."""
 
 from __future__ import annotations
 
@@ -33,3 +33,18 @@ def test_out_of_range_names_the_key_and_the_range(key, value):
     with pytest.raises(ConfigError) as err:
         parallelism.count(key, value, cores=16)
     assert str(err.value).startswith(f"{key}={value!r}: expected auto or a whole number from 1 to 16")
+
+
+def test_fit_workers_auto_follows_the_threads_and_workers_1_makes_it_one():
+    assert parallelism.fit_workers("auto", "auto", cores=16) is None  # auto: the job's threads
+    assert parallelism.fit_processes(None, 4) == 4
+    assert parallelism.fit_workers(1, "auto", cores=16) == 1  # exclusive timings stay exclusive
+    assert parallelism.fit_workers(1, 3, cores=16) == 3  # unless fit_workers is given
+    assert parallelism.fit_workers("auto", "2", cores=16) == 2
+    assert parallelism.fit_processes(2, 8) == 2
+
+
+@pytest.mark.parametrize("value", [0, -2, 17, "x", 2.5])
+def test_fit_workers_out_of_range_names_the_key(value):
+    with pytest.raises(ConfigError, match=r"^fit_workers=.*: expected auto or a whole number from 1 to 16"):
+        parallelism.fit_workers("auto", value, cores=16)

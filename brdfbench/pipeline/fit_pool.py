@@ -1,0 +1,206 @@
+"""Fits of several materials at once, each in its own single-threaded process.
+
+A representation whose class sets `fits_in_parallel` (its `fit` runs on one thread, or
+holds the GIL in Python code such as an L-BFGS loop) has the materials of a task fitted
+side by side by `processes` helper processes of the worker, one material each at a time,
+instead of one after another on a core or two. Each fit starts from `torch.manual_seed(seed)`
+on one torch thread, as a task of one material fitted in the worker does, so the fitted
+models are the same. The helpers are started with `spawn`, die with the worker (even when
+it is killed), and live on across the worker's tasks and jobs while their count fits.
+"""
+
+from __future__ import annotations
+
+import atexit
+import concurrent.futures as cf
+import contextlib
+import multiprocessing as mp
+import os
+import pickle
+import signal
+import tempfile
+import traceback
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from .memory import process_peak, reset_process_peak
+
+#: Where the tables are shared with the helpers: memory, where the system has it.
+_SHM = "/dev/shm"
+_POOL: cf.ProcessPoolExecutor | None = None
+_SIZE = 0
+atexit.register(lambda: shutdown())
+
+
+def _init_helper() -> None:
+    from .worker import _die_with_parent
+
+    _die_with_parent()
+    import torch
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the supervisor
+    torch.set_num_threads(1)
+
+
+@dataclass(frozen=True)
+class _Target:
+    """A material as a helper receives it: its table's file values in a file the helper maps
+    (read-only, no copy) instead of tens of megabytes through a pipe."""
+
+    name: str
+    category: str
+    source: str
+    path: str
+
+    def material(self):
+        from ..merl import MerlTable
+        from ..protocol import Material
+
+        raw = np.asarray(np.load(self.path, mmap_mode="r"))
+        return Material(self.name, MerlTable(raw), self.category, self.source)
+
+
+def _fit_one(cls: type, params: dict[str, Any], target: _Target, seed: int):
+    """One material's fit in a helper: the fitted model, or the exception it raised (kept
+    where it pickles, else its text), so that one failed fit fails its material only."""
+    import torch
+
+    try:
+        material = target.material()
+        torch.manual_seed(seed)
+        return True, cls(**params).fit(material, seed=seed)
+    except Exception as exc:  # returned, not raised: the caller decides what it means
+        try:
+            pickle.dumps(exc)
+            return False, exc
+        except Exception:
+            return False, RuntimeError("".join(traceback.format_exception_only(type(exc), exc)).strip())
+
+
+#: Thread pools of the native libraries a helper loads (scipy's and numpy's OpenBLAS, OpenMP,
+#: MKL) get one thread: read when the library loads, so set in the environment the helper
+#: starts with. (Measured on two cores: two helpers whose OpenBLAS kept its default two
+#: spinning threads each fitted three times slower than one fit alone.)
+ONE_THREAD = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+              "NUMEXPR_NUM_THREADS": "1"}
+
+
+@contextlib.contextmanager
+def _helper_environment():
+    saved = {k: os.environ.get(k) for k in ONE_THREAD}
+    os.environ.update(ONE_THREAD)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _ready(cls: type) -> int:
+    """Nothing: unpickling `cls` imports its module, so that the fits time no imports."""
+    return os.getpid()
+
+
+def ready(cls: type, processes: int) -> cf.ProcessPoolExecutor:
+    """The helpers, `processes` of them, started (in the one-thread environment) and with
+    `cls`'s module imported: start-up is not part of the fits' time."""
+    global _POOL, _SIZE
+    if _POOL is None or _SIZE != processes or getattr(_POOL, "_broken", False):
+        shutdown()
+        _POOL = cf.ProcessPoolExecutor(processes, mp_context=mp.get_context("spawn"), initializer=_init_helper)
+        _SIZE = processes
+    with _helper_environment():  # a helper starts on a submit that finds none idle
+        cf.wait([_POOL.submit(_ready, cls) for _ in range(processes)])
+    return _POOL
+
+
+def shutdown() -> None:
+    """Stop the helpers (the next parallel fit starts new ones)."""
+    global _POOL, _SIZE
+    if _POOL is not None:
+        _POOL.shutdown(wait=True, cancel_futures=True)
+    _POOL, _SIZE = None, 0
+
+
+def helper_pids() -> list[int]:
+    """Process ids of the live helpers (for their memory)."""
+    return [] if _POOL is None else [p.pid for p in list(getattr(_POOL, "_processes", {}).values()) if p.pid]
+
+
+class HelperDied(RuntimeError):
+    """A fit's helper process ended (a crash, os._exit, the out-of-memory killer)."""
+
+
+_LOST = object()  # a fit whose helper died before it returned
+
+
+def fit_parallel(model, targets: Sequence, seed: int, processes: int) -> tuple[list[tuple[bool, Any]], int]:
+    """(per target: (True, fitted model) or (False, the exception), the helpers' summed peak
+    resident bytes during these fits). `model` is an unfitted instance: its class and params
+    are what each helper builds. Where a helper dies, every fit that had not returned runs
+    again alone in a fresh helper, so that only a fit that kills its helper fails (naming how
+    it ended)."""
+    with tempfile.TemporaryDirectory(prefix="brdfbench-fit-", dir=_SHM if os.path.isdir(_SHM) else None) as folder:
+        shared: list[_Target] = []
+
+        def share(i: int) -> _Target:
+            if i == len(shared):
+                path = os.path.join(folder, f"{i}.npy")
+                np.save(path, targets[i].table.raw)
+                shared.append(_Target(targets[i].name, targets[i].category, targets[i].source, path))
+            return shared[i]
+
+        out, peak = _round(model, range(len(targets)), share, seed, processes)
+        for i in [i for i, r in enumerate(out) if r is _LOST]:
+            again, p = _round(model, [i], share, seed, 1)
+            peak = max(peak, p)
+            out[i] = again[0] if again[0] is not _LOST else (
+                False, HelperDied(f"a fit helper process died ({_cause}) while fitting this material"))
+    return out, peak
+
+
+_cause = "no exit status"
+
+
+def _round(model, indices, share, seed: int, processes: int) -> tuple[list, int]:
+    """The fits of `indices` on `processes` helpers: their outcomes (_LOST where a helper
+    died first) and the helpers' summed peak memory."""
+    global _cause
+    pool = ready(type(model), max(1, processes))
+    for pid in helper_pids():  # helpers started later count their whole life, their start included
+        reset_process_peak(pid)
+    with _helper_environment():
+        # each fit starts as soon as its table is shared
+        futures = [pool.submit(_fit_one, type(model), dict(model.params), share(i), seed) for i in indices]
+    out: list = []
+    broken = False
+    for future in futures:
+        try:
+            out.append(future.result())
+        except cf.process.BrokenProcessPool:
+            if not broken:
+                _cause = _death()
+            broken = True
+            out.append(_LOST)
+        except Exception as exc:  # the model or its result did not pickle, and the like
+            out.append((False, exc))
+    peak = sum(process_peak(pid) or 0 for pid in helper_pids())
+    if broken:
+        shutdown()
+    return out, peak
+
+
+def _death() -> str:
+    """Words for how the first helper that ended on its own ended."""
+    from .worker import exit_cause
+
+    for p in list(getattr(_POOL, "_processes", {}).values()):
+        p.join(timeout=1)
+        if p.exitcode not in (None, 0, -signal.SIGTERM):  # the pool ends the others with SIGTERM
+            return exit_cause(p.exitcode)
+    return "no exit status"
