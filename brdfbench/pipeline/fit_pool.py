@@ -26,6 +26,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .memory import process_peak, reset_process_peak
+from .processes import die_with_parent, exit_cause, sync_environment
 
 #: Where the tables are shared with the helpers: memory, where the system has it.
 _SHM = "/dev/shm"
@@ -35,9 +36,7 @@ atexit.register(lambda: shutdown())
 
 
 def _init_helper() -> None:
-    from .worker import _die_with_parent
-
-    _die_with_parent()
+    die_with_parent()
     import torch
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the supervisor
@@ -62,12 +61,14 @@ class _Target:
         return Material(self.name, MerlTable(raw), self.category, self.source)
 
 
-def _fit_one(cls: type, params: dict[str, Any], target: _Target, seed: int):
-    """One material's fit in a helper: the fitted model, or the exception it raised (kept
-    where it pickles, else its text), so that one failed fit fails its material only."""
+def _fit_one(cls: type, params: dict[str, Any], target: _Target, seed: int, env: dict[str, str], cwd: str):
+    """One material's fit in a helper, in the caller's environment variables and folder: the
+    fitted model, or the exception it raised (kept where it pickles, else its text), so that
+    one failed fit fails its material only."""
     import torch
 
     try:
+        sync_environment(env, cwd)
         material = target.material()
         torch.manual_seed(seed)
         return True, cls(**params).fit(material, seed=seed)
@@ -176,7 +177,8 @@ def _round(model, indices, share, seed: int, processes: int) -> tuple[list, int]
         reset_process_peak(pid)
     with _helper_environment():
         # each fit starts as soon as its table is shared
-        futures = [pool.submit(_fit_one, type(model), dict(model.params), share(i), seed) for i in indices]
+        env, cwd = dict(os.environ), os.getcwd()
+        futures = [pool.submit(_fit_one, type(model), dict(model.params), share(i), seed, env, cwd) for i in indices]
     out: list = []
     broken = False
     for future in futures:
@@ -197,8 +199,6 @@ def _round(model, indices, share, seed: int, processes: int) -> tuple[list, int]
 
 def _death() -> str:
     """Words for how the first helper that ended on its own ended."""
-    from .worker import exit_cause
-
     for p in list(getattr(_POOL, "_processes", {}).values()):
         p.join(timeout=1)
         if p.exitcode not in (None, 0, -signal.SIGTERM):  # the pool ends the others with SIGTERM

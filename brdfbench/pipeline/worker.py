@@ -39,6 +39,9 @@ from ..errors import BrdfbenchError
 from .config import RunConfig
 from .memory import format_size, process_peak, process_rss, reset_process_peak
 from .plan import Task
+from .processes import die_with_parent as _die_with_parent
+from .processes import exit_cause
+from .processes import sync_environment as _sync_environment
 
 log = logging.getLogger(__name__)
 
@@ -48,30 +51,6 @@ START_TIMEOUT_S = 300.0
 SETUP_MIN_S = 120.0
 #: Seconds between the supervisor's looks at a worker's resident memory (harness.memory_limit).
 MEMORY_POLL_S = 0.05
-
-_SIGNALS = {
-    signal.SIGSEGV: "segmentation fault (SIGSEGV)",
-    signal.SIGKILL: "killed by SIGKILL (the out-of-memory killer, or kill -9)",
-    signal.SIGABRT: "aborted (SIGABRT)",
-    signal.SIGBUS: "bus error (SIGBUS)",
-    signal.SIGFPE: "floating-point exception (SIGFPE)",
-    signal.SIGILL: "illegal instruction (SIGILL)",
-    signal.SIGTERM: "terminated (SIGTERM)",
-}
-
-
-def exit_cause(code: int | None) -> str:
-    """Words for a worker's exit status."""
-    if code is None:
-        return "no exit status"
-    if code < 0:
-        sig = -code
-        try:
-            return _SIGNALS.get(signal.Signals(sig), f"killed by signal {signal.Signals(sig).name}")
-        except ValueError:
-            return f"killed by signal {sig}"
-    return f"exited with status {code} (the plugin ended the process, e.g. os._exit or sys.exit)"
-
 
 @dataclass
 class Outcome:
@@ -312,25 +291,6 @@ def shared_worker() -> Worker:
 
 
 # --------------------------------------------------------------------------- inside the worker
-
-
-def _die_with_parent() -> None:
-    """Linux: the kernel kills this worker when its supervisor dies (even by SIGKILL)."""
-    if sys.platform.startswith("linux"):
-        try:
-            import ctypes
-
-            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-        except (OSError, AttributeError):
-            pass
-
-
-def _sync_environment(env: dict[str, str], cwd: str) -> None:
-    for key in set(os.environ) - set(env):
-        del os.environ[key]
-    os.environ.update(env)
-    if os.getcwd() != cwd:
-        os.chdir(cwd)
 
 
 def _worker_main(conn) -> None:

@@ -24,7 +24,10 @@ from dataclasses import dataclass
 from typing import Callable
 
 from .. import registry
-from ..pipeline.worker import START_TIMEOUT_S, _die_with_parent, _main_module_hidden, _sync_environment, exit_cause
+from ..pipeline.processes import die_with_parent as _die_with_parent
+from ..pipeline.processes import exit_cause
+from ..pipeline.processes import sync_environment as _sync_environment
+from ..pipeline.worker import START_TIMEOUT_S, _main_module_hidden
 from .kit import DEFAULT_PAIRS, Check, ConformanceReport
 
 #: Seconds a check may run by default (`brdfbench check --timeout`).
