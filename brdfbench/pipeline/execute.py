@@ -141,7 +141,7 @@ def _fit_and_measure(job: RunConfig, chunk: tuple[str, ...], state: JobState, tr
     note = f"fitting {job.label} to {len(chunk)} materials at once" if len(chunk) > 1 else None
     emit(("phase", _limit(job, len(chunk)), f"fitting {job.label} to {', '.join(chunk)}", note))
     busy = concurrency()
-    processes = 1 if trained is not None else min(len(chunk), parallel_fits(job, state.checked.cls, state.device))
+    processes = min(len(chunk), parallel_fits(job, state.checked.cls, state.device))  # 1 for a trained fold
     fit_extra = [Measurement("fit_batch", float(len(chunk)), "materials", False)] if len(chunk) > 1 else []
     if processes > 1:
         fitted, fit_s, fit_memory = _fit_side_by_side(job, materials, state, processes)

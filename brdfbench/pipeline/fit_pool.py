@@ -32,7 +32,7 @@ from .processes import die_with_parent, exit_cause, sync_environment
 _SHM = "/dev/shm"
 _POOL: cf.ProcessPoolExecutor | None = None
 _SIZE = 0
-atexit.register(lambda: shutdown())
+_WARM: set[type] = set()  # classes whose module the live helpers have imported
 
 
 def _init_helper() -> None:
@@ -102,9 +102,8 @@ def _helper_environment():
                 os.environ[k] = v
 
 
-def _ready(cls: type) -> int:
+def _ready(cls: type) -> None:
     """Nothing: unpickling `cls` imports its module, so that the fits time no imports."""
-    return os.getpid()
 
 
 def ready(cls: type, processes: int) -> cf.ProcessPoolExecutor:
@@ -115,8 +114,10 @@ def ready(cls: type, processes: int) -> cf.ProcessPoolExecutor:
         shutdown()
         _POOL = cf.ProcessPoolExecutor(processes, mp_context=mp.get_context("spawn"), initializer=_init_helper)
         _SIZE = processes
-    with _helper_environment():  # a helper starts on a submit that finds none idle
-        cf.wait([_POOL.submit(_ready, cls) for _ in range(processes)])
+    if cls not in _WARM:
+        with _helper_environment():  # a helper starts on a submit that finds none idle
+            cf.wait([_POOL.submit(_ready, cls) for _ in range(processes)])
+        _WARM.add(cls)
     return _POOL
 
 
@@ -126,6 +127,10 @@ def shutdown() -> None:
     if _POOL is not None:
         _POOL.shutdown(wait=True, cancel_futures=True)
     _POOL, _SIZE = None, 0
+    _WARM.clear()
+
+
+atexit.register(shutdown)
 
 
 def helper_pids() -> list[int]:
@@ -156,22 +161,19 @@ def fit_parallel(model, targets: Sequence, seed: int, processes: int) -> tuple[l
                 shared.append(_Target(targets[i].name, targets[i].category, targets[i].source, path))
             return shared[i]
 
-        out, peak = _round(model, range(len(targets)), share, seed, processes)
+        out, peak, _ = _round(model, range(len(targets)), share, seed, processes)
         for i in [i for i, r in enumerate(out) if r is _LOST]:
-            again, p = _round(model, [i], share, seed, 1)
+            again, p, cause = _round(model, [i], share, seed, 1)
             peak = max(peak, p)
             out[i] = again[0] if again[0] is not _LOST else (
-                False, HelperDied(f"a fit helper process died ({_cause}) while fitting this material"))
+                False, HelperDied(f"a fit helper process died ({cause}) while fitting this material"))
     return out, peak
 
 
-_cause = "no exit status"
-
-
-def _round(model, indices, share, seed: int, processes: int) -> tuple[list, int]:
+def _round(model, indices, share, seed: int, processes: int) -> tuple[list, int, str | None]:
     """The fits of `indices` on `processes` helpers: their outcomes (_LOST where a helper
-    died first) and the helpers' summed peak memory."""
-    global _cause
+    died first), the helpers' summed peak memory, and how the helper that died ended (None
+    where none did)."""
     pool = ready(type(model), max(1, processes))
     for pid in helper_pids():  # helpers started later count their whole life, their start included
         reset_process_peak(pid)
@@ -180,21 +182,19 @@ def _round(model, indices, share, seed: int, processes: int) -> tuple[list, int]
         env, cwd = dict(os.environ), os.getcwd()
         futures = [pool.submit(_fit_one, type(model), dict(model.params), share(i), seed, env, cwd) for i in indices]
     out: list = []
-    broken = False
+    cause = None
     for future in futures:
         try:
             out.append(future.result())
         except cf.process.BrokenProcessPool:
-            if not broken:
-                _cause = _death()
-            broken = True
+            cause = cause or _death()
             out.append(_LOST)
         except Exception as exc:  # the model or its result did not pickle, and the like
             out.append((False, exc))
     peak = sum(process_peak(pid) or 0 for pid in helper_pids())
-    if broken:
+    if cause is not None:
         shutdown()
-    return out, peak
+    return out, peak, cause
 
 
 def _death() -> str:
