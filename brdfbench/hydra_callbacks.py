@@ -41,11 +41,14 @@ def sweep_overrides(config: DictConfig) -> list[list[str]] | None:
 
     target = config.hydra.sweeper.get("_target_")
     task = list(config.hydra.overrides.task)
-    params = OmegaConf.to_container(config.hydra.sweeper.get("params") or {}, resolve=False)
+    def plain(node) -> dict:  # a DictConfig, or None / {} where the sweeper has no such key
+        return OmegaConf.to_container(node, resolve=False) if OmegaConf.is_config(node) else dict(node or {})
+
+    params = plain(config.hydra.sweeper.get("params"))
     if target == SECTION_SWEEPER:
         from hydra_plugins.brdfbench_sweeper import job_overrides
 
-        sections = OmegaConf.to_container(config.hydra.sweeper.get("sections") or {}, resolve=False)
+        sections = plain(config.hydra.sweeper.get("sections"))
         return job_overrides(params, sections, task)
     if target != BASIC_SWEEPER:
         return None

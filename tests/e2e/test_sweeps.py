@@ -23,6 +23,12 @@ def test_a_bad_override_in_any_job_fails_before_any_work(tmp_path, cli):
                f"results_dir={res}", cwd=tmp_path)
     assert out.returncode == 2, out.stdout + out.stderr
     assert "job 0" in out.stderr and "'cubic'" in out.stderr and "nothing was run" in out.stderr
+    # profile=full sweeps with Hydra's basic sweeper (no sections): validated whole as well
+    out = cli("-m", "profile=full", "representation=lambert,merl", "representation.params.mode=cubic", *SMALL,
+              "limit=1", f"results_dir={res}", cwd=tmp_path)
+    assert out.returncode == 2, out.stdout + out.stderr
+    assert "nothing was run" in out.stderr and "Callback" not in out.stderr
+    assert not (res / "brdfbench.sqlite").exists()
     # lambert takes no mode: Hydra's several lines become one naming the key
     assert "representation.params.mode: representation.params has no key 'mode'" in out.stderr
     assert not (res / "brdfbench.sqlite").exists()
