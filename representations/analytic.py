@@ -110,7 +110,8 @@ class AnalyticBRDF(Representation):
     # -- the model -------------------------------------------------------------------
     @classmethod
     def lobe(cls, g: Geometry, c: dict[str, Tensor]) -> Tensor:
-        """Scalar specular lobe (N,) for k_s = 1; `c` holds the shape coefficients as 0-d tensors."""
+        """Specular lobe for k_s = 1: (N,), or (N, 3) where a shape coefficient is RGB; `c` holds
+        the shape coefficients as `shape_of` gives them."""
         raise NotImplementedError
 
     @classmethod
@@ -119,13 +120,20 @@ class AnalyticBRDF(Representation):
         raise NotImplementedError
 
     @classmethod
+    def shape_of(cls, values: dict[str, Tensor]) -> dict[str, Tensor]:
+        """The shape coefficients `lobe` takes: 0-d tensors for scalar ones, (3,) for RGB ones."""
+        sizes = {c.name: c.size for c in cls.COEFFS}
+        return {k: (v if sizes[k] > 1 else v[0]) for k, v in values.items() if k not in ("kd", "ks")}
+
+    @classmethod
     def combine(cls, kd: Tensor, ks: Tensor, lobe: Tensor) -> Tensor:
-        return kd * INV_PI + lobe[:, None] * ks
+        """k_d/π + k_s ⊙ lobe; a lobe is (N,) or, where a shape coefficient is RGB, (N, 3)."""
+        return kd * INV_PI + (lobe[:, None] if lobe.dim() == 1 else lobe) * ks
 
     def _eval(self, wi: Tensor, wo: Tensor) -> Tensor:
         dtype = wi.dtype
         c = {k: v.to(dtype) for k, v in self.coeffs.items()}
-        shape = {k: v[0] for k, v in c.items() if k not in ("kd", "ks")}
+        shape = self.shape_of(c)
         out = self.combine(c["kd"], c["ks"], self.lobe(reused.derived(geometry, wi, wo), shape))
         return out.clamp(0.0, torch.finfo(dtype).max)
 

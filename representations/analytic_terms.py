@@ -50,6 +50,7 @@ class Geometry(NamedTuple):
     cos2_h: Tensor  # h_z² (h_z clamped ≥ 0)
     sin2_h: Tensor  # h_x² + h_y², in [0, 1]
     cos_d: Tensor  # ωi·h = |ωi + ωo| / 2, in [0, 1]
+    dot_xy: Tensor  # ωi_x ωo_x + ωi_y ωo_y (the tangential part of ωi·ωo), in [-1, 1]
 
 
 def geometry(wi: Tensor, wo: Tensor) -> Geometry:
@@ -66,6 +67,7 @@ def geometry(wi: Tensor, wo: Tensor) -> Geometry:
         cos2_h=hz * hz,
         sin2_h=sin2_h,
         cos_d=cos_d,
+        dot_xy=(wi[:, 0] * wo[:, 0] + wi[:, 1] * wo[:, 1]).clamp(-1.0, 1.0),
     )
 
 
@@ -111,3 +113,17 @@ def blinn_phong_lobe(n: Tensor, g: Geometry) -> Tensor:
 def ior_to_f0(ior: Tensor) -> Tensor:
     r = (ior - 1.0) / (ior + 1.0)
     return r * r
+
+
+def fresnel_dielectric(eta: Tensor, cos_d: Tensor) -> Tensor:
+    """Unpolarised Fresnel reflectance of a dielectric of relative index η > 0 (Cook and
+    Torrance 1982, eq. in §"The Fresnel term"): with c = cosθd and g² = η² + c² − 1,
+    F = ½ (g − c)²/(g + c)² · (1 + ((c(g + c) − 1)/(c(g − c) + 1))²); 1 where g² ≤ 0
+    (total internal reflection, η < 1)."""
+    c = cos_d
+    g2 = eta * eta + c * c - 1.0
+    g = torch.sqrt(g2.clamp(min=0.0))
+    a = (g - c) / (g + c).clamp(min=torch.finfo(c.dtype).tiny)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    f = 0.5 * a * a * (1.0 + b * b)
+    return torch.where(g2 > 0, f.clamp(0.0, 1.0), torch.ones_like(f))

@@ -79,11 +79,23 @@ class _Geometry:
         self.cos2_h = hz * hz
         self.sin2_h = dr.clip(h.x * h.x + h.y * h.y, 0.0, 1.0)
         self.cos_d = dr.clip(0.5 * dr.norm(s), 0.0, 1.0)
+        self.dot_xy = dr.clip(wi.x * wo.x + wi.y * wo.y, -1.0, 1.0)
 
 
 def _ggx_ndf(a2, g: _Geometry):
     q = a2 * g.cos2_h + g.sin2_h
     return a2 / (math.pi * q * q)
+
+
+def fresnel_dielectric(eta, cos_d):
+    """Twin of analytic_terms.fresnel_dielectric (fp32, same clamps)."""
+    c = cos_d
+    g2 = eta * eta + c * c - 1.0
+    g = dr.sqrt(dr.maximum(g2, 0.0))
+    a = (g - c) / dr.maximum(g + c, np.finfo(np.float32).tiny)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    f = 0.5 * a * a * (1.0 + b * b)
+    return dr.select(g2 > 0, dr.clip(f, 0.0, 1.0), 1.0)
 
 
 def _schlick_fresnel(f0, one_minus_f0, cos_d):

@@ -202,8 +202,7 @@ class _Space:
 
 
 def _predict(cls, geom: Geometry, values: dict[str, torch.Tensor]) -> torch.Tensor:
-    shape = {k: v[0] for k, v in values.items() if k not in ("kd", "ks")}
-    return cls.combine(values["kd"], values["ks"], cls.lobe(geom, shape))
+    return cls.combine(values["kd"], values["ks"], cls.lobe(geom, cls.shape_of(values)))
 
 
 def _peak_geometry(theta_d: float) -> Geometry:
@@ -252,7 +251,9 @@ def _fit(model: Representation, target: Material, seed: int) -> FitResult:
             if c.name in shape:
                 shape[c.name] = min(max(shape[c.name], c.lower), c.upper)
         with torch.no_grad():
-            s_peak = float(cls.lobe(peak_geom, {k: torch.tensor(v, dtype=torch.float64) for k, v in shape.items()})[0])
+            init = cls.shape_of({c.name: torch.full((c.size,), float(shape[c.name]), dtype=torch.float64)
+                                 for c in cls.COEFFS if c.name in shape})
+            s_peak = float(cls.lobe(peak_geom, init).reshape(-1).mean())
         ks = np.clip(peak / max(s_peak, 1e-300), ks_spec.lower, ks_spec.upper)
         x0 = space.to_x({"kd": data.diffuse, "ks": ks, **shape})
         x, nit = coarse.minimize(x0, COARSE_MAX_ITER)
