@@ -21,6 +21,7 @@ from brdfbench.errors import ConfigError, ModelFileError
 from brdfbench.protocol import Material, Representation
 from brdfbench.state_checks import expect_tensor
 
+from .fit_losses import DEFAULT_LOSS, FIT_LOSSES
 from .analytic_terms import (ALPHA_MIN, Geometry, blinn_phong_lobe, geometry, ggx_ndf, ior_to_f0, schlick_fresnel,
                              schlick_g_over_4cc, smith_g2_over_4cc)
 
@@ -58,9 +59,10 @@ def _check_int(model: str, name: str, value: Any, lo: int) -> int:
 class AnalyticBRDF(Representation):
     """f = k_d/π + k_s ⊙ lobe; subclasses define COEFFS (after kd, ks), `lobe` and `init_shape`.
 
-    Constructor params only steer the fit: `n_samples` valid MERL cells drawn (seeded) to
-    fit on, and `restarts` roughness initialisations (at most 8 distinct ones; the best
-    fit is kept). The fitted coefficients live in `coeffs` (float64 tensors, also readable
+    Constructor params only steer the fit: `n_samples` valid MERL cells (or direction
+    pairs) drawn (seeded) to fit on, `restarts` roughness initialisations (at most 8
+    distinct ones; the best fit is kept), and `loss`, the fitting objective (`fitting.py`:
+    the benchmark's L1-log-cos by default, or the metric a published fit was made with). The fitted coefficients live in `coeffs` (float64 tensors, also readable
     as attributes: `model.kd`, `model.alpha`, ...); after a fit `fit_loss` is the true
     L1-log-cos on the fit subsample and `fit_info` the rest of `metadata()`.
     """
@@ -76,12 +78,16 @@ class AnalyticBRDF(Representation):
     COEFFS: ClassVar[tuple[Coefficient, ...]] = (_KD, _KS)
     FLOPS: ClassVar[int] = 0
 
-    def __init__(self, n_samples: int = 32768, restarts: int = 4):
+    def __init__(self, n_samples: int = 32768, restarts: int = 4, loss: str = DEFAULT_LOSS):
         _check_int(self.NAME, "n_samples", n_samples, 16)
         _check_int(self.NAME, "restarts", restarts, 1)
-        super().__init__(n_samples=n_samples, restarts=restarts)
+        if loss not in FIT_LOSSES:
+            raise ConfigError(f"{self.NAME}: loss must be one of {', '.join(FIT_LOSSES)}, got {loss!r}")
+        # the default loss is left out of params, so configurations written before the key stay the same
+        super().__init__(n_samples=n_samples, restarts=restarts, **({} if loss == DEFAULT_LOSS else {"loss": loss}))
         self.n_samples = n_samples
         self.restarts = restarts
+        self.loss = loss
         self.coeffs: dict[str, Tensor] = {c.name: torch.full((c.size,), c.default, dtype=torch.float64) for c in self.COEFFS}
         self.fit_loss: float | None = None
         self.fit_info: dict[str, Any] = {}

@@ -1,15 +1,17 @@
 """Fitting the analytic BRDFs (`representations/analytic.py`) to a measured MERL table.
 
-Objective: the NBRDF loss |log(1 + f cosθi) − log(1 + f̂ cosθi)|, averaged over RGB and
-over a seeded uniform subsample (`n_samples`, default 2^15) of the target's usable cells
-(valid, both directions above the horizon): an unbiased estimate of the benchmark's
-`l1_log_cos` over the grid. (Measured on 16 materials, GGX: 2^13 cells gives a full-grid
+Objective (the model's `loss`, `fit_losses.py`): by default the NBRDF loss
+|log(1 + f cosθi) − log(1 + f̂ cosθi)|, averaged over RGB and over a seeded uniform
+subsample (`n_samples`, default 2^15) of the target's usable cells (valid, both directions
+above the horizon): an unbiased estimate of the benchmark's `l1_log_cos` over the grid; or
+the metric a published fit was made with, over direction pairs drawn as its authors weighted
+them. (Measured on 16 materials, GGX: 2^13 cells gives a full-grid
 loss 0.7 % worse than 2^15; 2^16 gives the same as 2^15.)
 
 Optimiser: scipy L-BFGS-B in float64 on bounded coefficients (k_s, roughness-like and
 IoR / exponent coefficients in log space, k_d and F0 linear), with autograd gradients of
-a smooth surrogate sqrt(r² + ε²) − ε of |r|; the reported loss is the true L1. The
-per-cell geometry is computed once, so an objective evaluation is only the lobe's
+a smooth surrogate sqrt(r² + ε²) − ε of |r| (squared losses need none); the reported loss
+is the true one. The per-cell geometry is computed once, so an objective evaluation is only the lobe's
 arithmetic. Restarts run on the first COARSE_SAMPLES cells of the subsample (a random
 subset, as the subsample is in random order); the best is refined on all of it.
 Torch runs single-threaded during the fit (restored after): see `brdfbench.threads`.
@@ -44,6 +46,7 @@ from brdfbench.threads import torch_threads
 from brdfbench.protocol import Material, Representation
 
 from .analytic_terms import Geometry, geometry
+from .fit_losses import DEFAULT_LOSS, LOSSES, FitLoss, compared, sample_pairs
 from .lambert import weighted_median
 
 #: Surrogate smoothing of |r| (r in log(1 + 1/sr) units).
@@ -71,12 +74,14 @@ class FitData:
 
     geom: Geometry  # (N,) float64 each
     cos_i: torch.Tensor  # (N, 1)
-    y: torch.Tensor  # (N, 3): log1p(f cosθi) of the target
+    y: torch.Tensor  # (N, 3): the target as the loss compares it (log1p(f cosθi) or f cosθi)
     n_usable: int
     diffuse: np.ndarray  # (3,) π × cosine-weighted median
     peak: np.ndarray  # (3,) specular excess at θh ≈ 0, θd < 30° (1/sr)
     peak_theta_d: float
     alpha_est: float
+    loss: FitLoss = LOSSES[DEFAULT_LOSS]
+    cells: np.ndarray | None = None  # (N,) flat MERL cell of each row (its target value's cell)
 
 
 @dataclass
@@ -146,15 +151,19 @@ def _peak_statistics(target: Material, usable: np.ndarray, diffuse: np.ndarray) 
     return peak, peak_theta_d, float(math.tan(theta_half) / HALF_WIDTH_PER_ALPHA)
 
 
-def prepare(target: Material, n_samples: int, seed: int, model_name: str) -> FitData:
+def prepare(target: Material, n_samples: int, seed: int, model_name: str, loss: str = DEFAULT_LOSS) -> FitData:
     usable = _usable_cells(target, model_name)
-    cells = np.flatnonzero(usable)
-    # A seeded random order: any prefix (the coarse restarts use one) is a uniform subsample.
-    rng = np.random.default_rng(seed)
-    cells = rng.permutation(cells)[:n_samples]
-    idx = torch.from_numpy(cells)
-    wi_all, wo_all = merl.grid_directions(torch.float64)
-    wi, wo = wi_all[idx], wo_all[idx]
+    spec = LOSSES[loss]
+    if spec.sampling == "cells":
+        cells = np.flatnonzero(usable)
+        # A seeded random order: any prefix (the coarse restarts use one) is a uniform subsample.
+        rng = np.random.default_rng(seed)
+        cells = rng.permutation(cells)[:n_samples]
+        idx = torch.from_numpy(cells)
+        wi_all, wo_all = merl.grid_directions(torch.float64)
+        wi, wo = wi_all[idx], wo_all[idx]
+    else:  # direction pairs drawn as the loss's authors weighted them, in random order too
+        wi, wo, cells = sample_pairs(spec, n_samples, seed, usable)
     f = torch.from_numpy(target.table.values.reshape(3, -1)[:, cells].T.copy()).clamp_min(0.0)
     cos_i = wi[:, 2:3].clone()
     weights = (wi[:, 2] * wo[:, 2]).numpy()
@@ -163,12 +172,14 @@ def prepare(target: Material, n_samples: int, seed: int, model_name: str) -> Fit
     return FitData(
         geom=geometry(wi, wo),
         cos_i=cos_i,
-        y=torch.log1p(f * cos_i),
+        y=compared(spec, f, cos_i),
         n_usable=int(usable.sum()),
         diffuse=diffuse,
         peak=peak,
         peak_theta_d=peak_theta_d,
         alpha_est=alpha_est,
+        loss=spec,
+        cells=cells,
     )
 
 
@@ -234,7 +245,7 @@ def fit_analytic(model: Representation, target: Material, *, seed: int = 0) -> F
 
 def _fit(model: Representation, target: Material, seed: int) -> FitResult:
     cls = type(model)
-    data = prepare(target, model.n_samples, seed, cls.NAME)
+    data = prepare(target, model.n_samples, seed, cls.NAME, getattr(model, "loss", DEFAULT_LOSS))
     space = _Space(cls.COEFFS)
     ks_spec = next(c for c in cls.COEFFS if c.name == "ks")
     peak_geom = _peak_geometry(data.peak_theta_d)
@@ -277,6 +288,7 @@ def _fit(model: Representation, target: Material, seed: int) -> FitResult:
         "n_fit_cells": int(n),
         "n_usable_cells": data.n_usable,
         "seed": int(seed),
+        "loss": data.loss.name,
     }
     return FitResult({k: v.tolist() for k, v in values.items()}, float(loss), info)
 
@@ -288,15 +300,19 @@ class _Problem:
         self.cls, self.space = cls, space
         self.geom = Geometry(*(t[rows] for t in data.geom))
         self.cos_i, self.y = data.cos_i[rows], data.y[rows]
+        self.loss = data.loss
 
     def residual(self, x: torch.Tensor) -> torch.Tensor:
         pred = _predict(self.cls, self.geom, self.space.unpack(x))
-        return torch.log1p(pred * self.cos_i) - self.y
+        return compared(self.loss, pred, self.cos_i) - self.y
 
     def objective(self, x: np.ndarray) -> tuple[float, np.ndarray]:
         xt = torch.from_numpy(x).requires_grad_(True)
         r = self.residual(xt)
-        loss = (torch.sqrt(r * r + EPSILON * EPSILON) - EPSILON).mean()
+        if self.loss.power == 1:
+            loss = (torch.sqrt(r * r + EPSILON * EPSILON) - EPSILON).mean()
+        else:
+            loss = (r * r).mean()
         if not bool(torch.isfinite(loss.detach())):
             return 1e30, np.zeros_like(x)
         loss.backward()
@@ -304,7 +320,8 @@ class _Problem:
 
     def true_loss(self, x: np.ndarray) -> float:
         with torch.no_grad():
-            return float(self.residual(torch.from_numpy(x)).abs().mean())
+            r = self.residual(torch.from_numpy(x))
+            return float((r.abs() if self.loss.power == 1 else r * r).mean())
 
     def minimize(self, x0: np.ndarray, max_iter: int) -> tuple[np.ndarray, int]:
         res = minimize(
