@@ -123,7 +123,9 @@ def fresnel_dielectric(eta: Tensor, cos_d: Tensor) -> Tensor:
     c = cos_d
     g2 = eta * eta + c * c - 1.0
     g = torch.sqrt(g2.clamp(min=0.0))
-    a = (g - c) / (g + c).clamp(min=torch.finfo(c.dtype).tiny)
-    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    s = (g + c).clamp(min=torch.finfo(c.dtype).tiny)
+    g_minus_c = (eta * eta - 1.0) / s  # g² − c² = η² − 1: no cancellation for η near 1
+    a = g_minus_c / s
+    b = (c * s - 1.0) / (c * g_minus_c + 1.0)
     f = 0.5 * a * a * (1.0 + b * b)
     return torch.where(g2 > 0, f.clamp(0.0, 1.0), torch.ones_like(f))

@@ -92,8 +92,10 @@ def fresnel_dielectric(eta, cos_d):
     c = cos_d
     g2 = eta * eta + c * c - 1.0
     g = dr.sqrt(dr.maximum(g2, 0.0))
-    a = (g - c) / dr.maximum(g + c, np.finfo(np.float32).tiny)
-    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    s = dr.maximum(g + c, np.finfo(np.float32).tiny)
+    g_minus_c = (eta * eta - 1.0) / s
+    a = g_minus_c / s
+    b = (c * s - 1.0) / (c * g_minus_c + 1.0)
     f = 0.5 * a * a * (1.0 + b * b)
     return dr.select(g2 > 0, dr.clip(f, 0.0, 1.0), 1.0)
 

@@ -67,3 +67,34 @@ TRIPLANE_GATED = RepresentationSpec(
     tags=frozenset({"isotropic", "reciprocal", "fittable", "neural"}),
     check_params={"epochs": 2, "n_samples": 60_000},  # the kit's quick run: a short fit
 )
+PUBLISHED_FIT = RepresentationSpec(
+    name="published_fit",
+    description="A published analytic fit of the target's MERL material (Ngan et al. 2005, Low et al. 2012, Bagher et al. 2012; via BBM), evaluated as published: no fitting",
+    target="brdfbench_representations.published:PublishedFit",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params={"material": "alum-bronze"},  # the kit's synthetic material has no published fit
+)
+COOK_TORRANCE_BECKMANN = RepresentationSpec(
+    name="cook_torrance_beckmann",
+    description="Cook-Torrance as Ngan et al. 2005 fitted it: kd/pi + ks D_Beckmann(m) G_vgroove F_Schlick(F0) / (pi cos cos); L1-log-cos fit",
+    target="brdfbench_representations.microfacet_models:CookTorranceBeckmann",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+)
+COOK_TORRANCE_1982 = RepresentationSpec(
+    name="cook_torrance_1982",
+    description="Original Cook-Torrance (1982) as Low et al. 2012 fitted it: kd/pi + ks F(IoR) D_Beckmann(m) G_vgroove / (pi cos cos); L1-log-cos fit",
+    target="brdfbench_representations.microfacet_models:CookTorrance1982",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+)
+LOW_SMOOTH = RepresentationSpec(
+    name="low_smooth",
+    description="Low et al. 2012 smooth-surface (ABC) model: kd/pi + ks (1 + B Dp^2)^-C F(IoR); L1-log-cos fit",
+    target="brdfbench_representations.microfacet_models:LowSmooth",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+)
+LOW_MICROFACET = RepresentationSpec(
+    name="low_microfacet",
+    description="Low et al. 2012 microfacet model as in their published fits: kd/pi + ks (1 + B(1 - cos theta_h))^-C G_vgroove F(IoR) / (pi cos cos); L1-log-cos fit",
+    target="brdfbench_representations.microfacet_models:LowMicrofacet",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+)
