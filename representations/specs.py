@@ -2,6 +2,9 @@
 
 from brdfbench.specs import RepresentationSpec
 
+#: The kit's quick run of the literature's analytic models: a short fit.
+QUICK_FIT = {"n_samples": 4096, "restarts": 1}
+
 MERL = RepresentationSpec(
     name="merl",
     description="Tabulated MERL ground truth, 90x90x180 cells (nearest-cell as the reference reader, or trilinear)",
@@ -79,22 +82,75 @@ COOK_TORRANCE_BECKMANN = RepresentationSpec(
     description="Cook-Torrance as Ngan et al. 2005 fitted it: kd/pi + ks D_Beckmann(m) G_vgroove F_Schlick(F0) / (pi cos cos); L1-log-cos fit",
     target="brdfbench_representations.microfacet_models:CookTorranceBeckmann",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
 )
 COOK_TORRANCE_1982 = RepresentationSpec(
     name="cook_torrance_1982",
     description="Original Cook-Torrance (1982) as Low et al. 2012 fitted it: kd/pi + ks F(IoR) D_Beckmann(m) G_vgroove / (pi cos cos); L1-log-cos fit",
     target="brdfbench_representations.microfacet_models:CookTorrance1982",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
 )
 LOW_SMOOTH = RepresentationSpec(
     name="low_smooth",
     description="Low et al. 2012 smooth-surface (ABC) model: kd/pi + ks (1 + B Dp^2)^-C F(IoR); L1-log-cos fit",
     target="brdfbench_representations.microfacet_models:LowSmooth",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
 )
 LOW_MICROFACET = RepresentationSpec(
     name="low_microfacet",
     description="Low et al. 2012 microfacet model as in their published fits: kd/pi + ks (1 + B(1 - cos theta_h))^-C G_vgroove F(IoR) / (pi cos cos); L1-log-cos fit",
     target="brdfbench_representations.microfacet_models:LowMicrofacet",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
+PHONG = RepresentationSpec(
+    name="phong",
+    description="Modified Phong (Lafortune and Willems 1994; Ngan et al.'s Blinn-Phong fits): kd/pi + ks (n+2)/(2 pi) cos^n(mirror angle); L1-log-cos fit",
+    target="brdfbench_representations.ngan_models:Phong",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
+WARD = RepresentationSpec(
+    name="ward",
+    description="Ward 1992 isotropic (as Ngan et al. 2005 fitted it): kd/pi + ks exp(-tan^2 theta_h/alpha^2)/(4 pi alpha^2 sqrt(cos_i cos_o)); L1-log-cos fit",
+    target="brdfbench_representations.ngan_models:Ward",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
+WARD_DUER = RepresentationSpec(
+    name="ward_duer",
+    description="Ward with Duer's 2006 normalisation: kd/pi + ks exp(-tan^2 theta_h/alpha^2)/(4 pi alpha^2 cos_i cos_o); L1-log-cos fit",
+    target="brdfbench_representations.ngan_models:WardDuer",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
+LAFORTUNE = RepresentationSpec(
+    name="lafortune",
+    description="One isotropic Lafortune et al. 1997 lobe with Ngan et al.'s normalisation (n+2)/(2 pi max(Cxy^2, Cz^2)^(n/2)); L1-log-cos fit",
+    target="brdfbench_representations.ngan_models:Lafortune",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
+ASHIKHMIN_SHIRLEY = RepresentationSpec(
+    name="ashikhmin_shirley",
+    description="Ashikhmin-Shirley 2000 specular term, isotropic, Schlick F(F0) (as Ngan et al. 2005 fitted it); L1-log-cos fit",
+    target="brdfbench_representations.ngan_models:AshikhminShirley",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
+ASHIKHMIN_SHIRLEY_IOR = RepresentationSpec(
+    name="ashikhmin_shirley_ior",
+    description="Ashikhmin-Shirley specular term with the dielectric Fresnel of an IoR (as Low et al. 2012 fitted it); L1-log-cos fit",
+    target="brdfbench_representations.ngan_models:AshikhminShirleyIor",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
+SGD = RepresentationSpec(
+    name="sgd",
+    description="Bagher et al. 2012 shifted gamma distribution microfacet (SGD): kd/pi + ks D_SGD(alpha, p; K_ap) G1 G1 F(F0, F1) / (pi cos cos), RGB shape; L1-log-cos fit",
+    target="brdfbench_representations.sgd:SGD",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
 )

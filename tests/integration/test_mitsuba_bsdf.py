@@ -24,14 +24,18 @@ from brdfbench.testing.kit import reference_material
 pytestmark = pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="llvm_ad_rgb needs libLLVM >= 19")
 
 #: Built-ins that must render through a native drjit kernel.
+LITERATURE = ("phong", "ward", "ward_duer", "lafortune", "ashikhmin_shirley", "ashikhmin_shirley_ior",
+              "cook_torrance_beckmann", "cook_torrance_1982", "low_smooth", "low_microfacet", "sgd")
 NATIVE = ("merl", "pca", "lambert", "blinn_phong", "cook_torrance", "ggx", "nbrdf", "naive_mlp", "tripleplane",
-          "triplane_gated")
+          "triplane_gated", "published_fit", *LITERATURE)
 #: Cheap fitting parameters: the adapter is under test here, not the fit.
 CHEAP = {
     "blinn_phong": {"n_samples": 512, "restarts": 1},
     "cook_torrance": {"n_samples": 512, "restarts": 1},
     "ggx": {"n_samples": 512, "restarts": 1},
     "pca": {"k": 2},
+    **{name: {"n_samples": 512, "restarts": 1} for name in LITERATURE},
+    "published_fit": {"source": "bagher_sgd", "material": "alum-bronze"},
 }
 SAMPLERS = {
     "uniform": {}, "cosine": {}, "power_cosine": {"exponent": 20.0}, "blinn_phong": {"exponent": 50.0},

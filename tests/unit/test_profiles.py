@@ -32,7 +32,11 @@ def test_first_look_runs_every_built_in_representation_and_a_render_section():
     assert len(main) + len(renders) == len(jobs)
     built_in = {n for n in registry.names("representations")
                 if registry.get("representations", n).target.startswith("brdfbench_representations")}
-    assert {_base(j["representation"]) for j in main} == built_in
+    # the literature's analytic baselines and published fits have a profile of their own
+    literature, _ = _jobs("profile=literature")
+    baselines = {j["representation"] for j in literature} - {"ggx", "nbrdf"}
+    assert {_base(j["representation"]) for j in main} == built_in - baselines
+    assert not baselines & {_base(j["representation"]) for j in main}
     assert 2 <= len(renders) <= 4 and all(j["scene"] == "sphere_envmap" for j in renders)
     assert all(int(j["scene.params.width"]) <= 128 for j in renders)
     assert cfg.dataset.params.size >= 12 and cfg.harness.n_random < 2**20
@@ -43,6 +47,17 @@ def test_first_look_materials_cover_every_family(tmp_path):
     ds = synthetic_dataset(cfg.dataset.params.size, seed=0, cache_dir=str(tmp_path))
     families = {next(c for c in CATEGORIES if name.startswith(f"synth-{c}-")) for name in ds.materials}
     assert families == set(CATEGORIES)
+
+
+def test_literature_profile_runs_every_published_source_and_its_models():
+    from brdfbench_representations.published import shipped_sources, source_model
+
+    jobs, cfg = _jobs("profile=literature")
+    assert cfg.dataset.name == "nbrdf_release"
+    published = {j["representation.params.source"] for j in jobs if j["representation"] == "published_fit"}
+    assert published == set(shipped_sources()) - {"ngan_he"}
+    refitted = {j["representation"] for j in jobs if j["representation"] != "published_fit"}
+    assert {source_model(s) for s in published} | {"ggx", "nbrdf"} == refitted
 
 
 def test_full_profile_is_the_previous_default():
