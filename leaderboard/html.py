@@ -12,7 +12,7 @@ from pathlib import Path
 import pandas as pd
 
 from . import (chart_html, drilldown, drilldown_html, figures_html, generation_render, machines, main_table,
-               published_render, view)
+               published_fits_render, published_fits_view, published_render, view)
 from . import plots as plots_module
 from .html_parts import CONTENDED, ON_GPU, anchor, assets, esc, number, svg, th
 from .html_parts import cell as _cell
@@ -295,7 +295,9 @@ def render(df: pd.DataFrame, source: str, results_dir: Path | None = None) -> st
     the files its cells left there (lobes, renders and their error maps)."""
     report = view.build(df, source)
     svgs = {name: svg(fig, name) for name, fig in plots_module.convergence_figures(df).items()}
-    return render_view(report, svgs, [] if report.empty else published_render.published_section(report), results_dir)
+    extra = [] if report.empty else [*published_fits_render.html_section(published_fits_view.build(df)),
+                                     *published_render.published_section(report)]
+    return render_view(report, svgs, extra, results_dir)
 
 
 def html_report(df: pd.DataFrame, results_dir: Path, source: str) -> list[Path]:

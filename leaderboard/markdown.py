@@ -179,14 +179,15 @@ def _failures(failures: list[view.Failure]) -> list[str]:
     return lines + [""]
 
 
-def render_view(report: view.Report, plots: Collection[str] = ()) -> str:
+def render_view(report: view.Report, plots: Collection[str] = (), fits=None) -> str:
+    """The text of `report`; `fits` (`published_fits_view.build`) adds "Published fits against our fits"."""
     lines = ["# brdfbench leaderboard", "", f"Generated {report.generated} from `{report.source}`.", ""]
     if report.empty:
         return "\n".join(lines + ["The results store is empty.", ""])
     lines += [f"brdfbench {', '.join(report.versions)}; git {', '.join(report.git_shas)}. "
               "Timings are from the machine that ran each cell:", ""]
     lines += [f"- {line}" for line in host_lines(report.hosts)] + [""]
-    from . import generation_render
+    from . import generation_render, published_fits_render
 
     for s in report.sections:
         if isinstance(s, ConvergenceSection):
@@ -195,6 +196,7 @@ def render_view(report: view.Report, plots: Collection[str] = ()) -> str:
             lines += generation_render.markdown(s)
         else:
             lines += table_section(s)
+    lines += published_fits_render.markdown(fits)
     lines += published_markdown(report)
     lines += machine_section(report.machines)
     return "\n".join(lines)
@@ -225,4 +227,6 @@ def machine_section(speeds: list) -> list[str]:
 
 def render(df: pd.DataFrame, source: str, plots: Collection[str] = ()) -> str:
     """The leaderboard text; `plots` names the figure files written beside it (linked from their sections)."""
-    return render_view(view.build(df, source), plots)
+    from . import published_fits_view
+
+    return render_view(view.build(df, source), plots, published_fits_view.build(df))

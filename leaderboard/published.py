@@ -2,9 +2,10 @@
 
 `data/seed_figures.csv` holds every table of the four source papers as printed (with
 their sources); `data/published_matches.csv` says which of those rows measure what one of
-our metrics measures: our representation, metric and scene ("*": any rendered scene), the
-factor from the paper's unit to ours (`scale`), how the setups differ, and, for figures
-that depend on them, the paper's materials and training recipe.
+our metrics measures: our representation (with the parameters a configuration must have,
+where it names some: `published_fit(source=bagher_sgd)`), metric and scene ("*": any
+rendered scene), the factor from the paper's unit to ours (`scale`), how the setups differ,
+and, for figures that depend on them, the paper's materials and training recipe.
 
 A verdict is given only where the two figures measure the same thing:
 - a time or a rate (seconds, anything per second) measures the machine and its software as
@@ -28,6 +29,7 @@ Table 2".
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -38,7 +40,7 @@ from . import units
 from .published_data import FIGURES_FILE, Match, Published, citation, figures, matches
 
 if TYPE_CHECKING:  # the view's types, for annotations only (no import cycle through the view)
-    from .view import Cell, Metric, Report, TableSection
+    from .view import Cell, Metric, Report, Row, TableSection
 
 AGREEMENT_FACTOR = 2.0
 #: Configurations (conf/) that train on a source paper's own recipe rather than this
@@ -107,6 +109,21 @@ def find(match: Match, published: list[Published]) -> Published | None:
                 and p.model == match.model and p.metric == match.metric):
             return p
     return None
+
+
+def param_text(value) -> str:
+    """A stored parameter as a match names it: a string as is, anything else as JSON (null, true, 3)."""
+    return value if isinstance(value, str) else json.dumps(value)
+
+
+def selects(match: Match, row: Row) -> bool:
+    """Whether `row` is a configuration the match names: its plugin (or label) is the match's
+    representation, and it has every parameter the match names, with that value."""
+    if row.plugin != match.representation and row.label != match.representation:
+        return False
+    inner = (row.params or {}).get("params")
+    inner = inner if isinstance(inner, dict) else {}
+    return all(key in inner and param_text(inner[key]) == value for key, value in match.params)
 
 
 def hardware_bound(unit: str) -> bool:
@@ -201,7 +218,7 @@ def compare(report: Report) -> list[Comparison]:
             if m.scene == "*" and s.scene == "brdf_space" or m.scene not in ("*", s.scene):
                 continue
             for row in s.rows:
-                if row.plugin != m.representation and row.label != m.representation:
+                if not selects(m, row):
                     continue
                 cell = row.cell(m.our_metric)
                 if cell is None:

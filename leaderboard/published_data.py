@@ -2,7 +2,9 @@
 
 `data/seed_figures.csv` holds every table of the four source papers as printed (with
 their sources); `data/published_matches.csv` says which rows measure what one of our
-metrics measures, the unit factor, and the paper's materials and recipe. Read here with
+metrics measures, the unit factor, and the paper's materials and recipe. Its
+`representation` names our representation, optionally with the parameters a configuration
+must have, `published_fit(source=bagher_sgd)` (`Match.params`). Read here with
 no knowledge of reports, so that any part of the report may quote a figure
 (`published.compare` sets them beside ours).
 """
@@ -58,6 +60,8 @@ class Match:
     dataset: str = ""  # the paper's materials ("30 MERL/RGL"); "" where the figure does not depend on them
     paper_recipe: str = ""  # how the paper trains the model; "" where it has no training schedule
     recipe_configs: tuple[str, ...] = ()  # our configurations that train on that recipe
+    #: parameters our configuration must have, (name, value as text): `published_fit(source=bagher_sgd)`
+    params: tuple[tuple[str, str], ...] = ()
 
 
 def _rows(name: str) -> list[dict[str, str]]:
@@ -102,8 +106,32 @@ def figures() -> list[Published]:
     return out
 
 
+#: `name(key=value, key=value)`: a representation and the parameters a match requires.
+_CALL = re.compile(r"\s*([^\s()]+)\s*\((.*)\)\s*", re.DOTALL)
+
+
+def representation_spec(text: str) -> tuple[str, tuple[tuple[str, str], ...]]:
+    """("published_fit", (("source", "bagher_sgd"),)) of "published_fit(source=bagher_sgd)"; a
+    plain name has no parameters. ValueError for a malformed parameter list."""
+    m = _CALL.fullmatch(text)
+    if m is None:
+        return text.strip(), ()
+    name, inner = m.groups()
+    params = []
+    for part in filter(None, (p.strip() for p in inner.split(","))):
+        key, eq, value = part.partition("=")
+        if not eq or not key.strip() or not value.strip():
+            raise ValueError(f"{MATCHES_FILE}: representation {text!r}: expected name(key=value, ...)")
+        params.append((key.strip(), value.strip()))
+    return name, tuple(params)
+
+
 def matches() -> list[Match]:
-    return [Match(r["seed"], r["table"], r["model"], r["metric"], r["representation"], r["our_metric"], r["scene"],
-                  float(r["scale"]), r["setup"], (r.get("dataset") or "").strip(),
-                  (r.get("paper_recipe") or "").strip(), tuple((r.get("recipe_configs") or "").split()))
-            for r in _rows(MATCHES_FILE)]
+    out = []
+    for r in _rows(MATCHES_FILE):
+        name, params = representation_spec(r["representation"])
+        out.append(Match(r["seed"], r["table"], r["model"], r["metric"], name, r["our_metric"], r["scene"],
+                         float(r["scale"]), r["setup"], (r.get("dataset") or "").strip(),
+                         (r.get("paper_recipe") or "").strip(), tuple((r.get("recipe_configs") or "").split()),
+                         params))
+    return out

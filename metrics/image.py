@@ -3,8 +3,8 @@
 Each concrete class fixes a metric and a space ("ldr" or "hdr", see `image_functional`), so
 the registry builds it without arguments and its unit is exact; keyword arguments are the
 functional metric's options, e.g. `PSNRHDR(data_range=4.0)` or `FLIPLDR(exposure=1.0)`.
-`device=` (e.g. `SSIMLDR(device="cuda")`) is where MSE, RMSE, PSNR and SSIM compute (see
-`image_functional`); FLIP is numpy and always computes on the CPU, whatever `device` says.
+`device=` (e.g. `SSIMLDR(device="cuda")`) is where MSE, RMSE, MAE, PSNR and SSIM compute
+(see `image_functional`); FLIP is numpy and always computes on the CPU, whatever `device` says.
 """
 
 from __future__ import annotations
@@ -51,6 +51,10 @@ class RMSE(ImageMetric):
     fn = staticmethod(IF.rmse)
 
 
+class MAE(ImageMetric):
+    fn = staticmethod(IF.mae)
+
+
 class PSNR(ImageMetric):
     fn = staticmethod(IF.psnr)
     unit = "dB"
@@ -88,6 +92,16 @@ class RMSELDR(RMSE):
 
 
 class RMSEHDR(RMSE):
+    space = "hdr"
+    unit = "radiance"
+
+
+class MAELDR(MAE):
+    space = "ldr"
+    unit = "1"
+
+
+class MAEHDR(MAE):
     space = "hdr"
     unit = "radiance"
 

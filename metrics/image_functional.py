@@ -13,7 +13,7 @@ A batch reduces to the mean of its per-image values (`reduction="none"` keeps th
 set of images scores the same in one call or in many. PSNR is capped at `max_db` (100 dB by
 default) so that one exact image does not make a mean over images infinite.
 
-Devices: MSE, RMSE, PSNR and SSIM are torch and take `device=` (default: where `pred` lies;
+Devices: MSE, RMSE, MAE, PSNR and SSIM are torch and take `device=` (default: where `pred` lies;
 a CUDA device computes there in fp64, and the figures agree with the CPU's to rounding);
 their values (and maps) come back on `pred`'s device. FLIP is the `flip-evaluator` package
 (numpy, on the CPU): it takes no device and always runs on the CPU.
@@ -112,7 +112,7 @@ def _data_range(name: str, t: torch.Tensor, space: str, data_range: float | None
     return peak
 
 
-# --------------------------------------------------------------------------- MSE, RMSE, PSNR
+# --------------------------------------------------------------------------- MSE, RMSE, MAE, PSNR
 
 
 def _mse_per_image(p: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
@@ -131,6 +131,13 @@ def rmse(pred, target, *, space: str, exposure: float = 0.0, reduction: str = "m
     """Root mean squared error of each image (a batch averages the per-image RMSEs)."""
     p, t, single = _in_space("rmse", pred, target, space, exposure, device)
     return _home(_reduce(_mse_per_image(p, t).sqrt(), single, reduction), pred)
+
+
+def mae(pred, target, *, space: str, exposure: float = 0.0, reduction: str = "mean",
+        device: "torch.device | str | None" = None) -> torch.Tensor:
+    """Mean absolute error over pixels and channels (a batch averages the per-image MAEs)."""
+    p, t, single = _in_space("mae", pred, target, space, exposure, device)
+    return _home(_reduce((p - t).abs().flatten(1).mean(dim=1), single, reduction), pred)
 
 
 def psnr(pred, target, *, space: str, exposure: float = 0.0, data_range: float | None = None,

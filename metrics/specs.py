@@ -39,7 +39,7 @@ _IMAGE = frozenset({"image"})
 
 #: Ranking preference of the image metrics (lower first); the others are shown, not ranked by.
 _IMAGE_RANKS = {"psnr_ldr": 10, "ssim_ldr": 11, "flip_ldr": 12, "psnr_hdr": 13, "ssim_hdr": 14, "flip_hdr": 15,
-                "rmse_hdr": 16, "rmse_ldr": 17}
+                "rmse_hdr": 16, "rmse_ldr": 17, "mae_hdr": 18, "mae_ldr": 19}
 
 
 def _image(name: str, description: str, cls: str, unit: str, higher_is_better: bool) -> MetricSpec:
@@ -51,6 +51,8 @@ MSE_LDR = _image("mse_ldr", "Image MSE of tone-mapped (sRGB, [0, 1]) images", "M
 MSE_HDR = _image("mse_hdr", "Image MSE of linear radiance", "MSEHDR", "radiance²", False)
 RMSE_LDR = _image("rmse_ldr", "Image RMSE of tone-mapped (sRGB, [0, 1]) images", "RMSELDR", "1", False)
 RMSE_HDR = _image("rmse_hdr", "Image RMSE of linear radiance", "RMSEHDR", "radiance", False)
+MAE_LDR = _image("mae_ldr", "Image MAE of tone-mapped (sRGB, [0, 1]) images", "MAELDR", "1", False)
+MAE_HDR = _image("mae_hdr", "Image MAE of linear radiance", "MAEHDR", "radiance", False)
 PSNR_LDR = _image("psnr_ldr", "PSNR of tone-mapped images, data range 1, capped at 100 dB", "PSNRLDR", "dB", True)
 PSNR_HDR = _image("psnr_hdr", "PSNR of linear radiance, data range = target's max, capped at 100 dB", "PSNRHDR",
                   "dB", True)

@@ -35,6 +35,8 @@ Tensor = torch.Tensor
 
 COS_MIN = 1e-7
 ALPHA_MIN = 1e-6
+#: Beckmann's m is floored here (by the Beckmann models)
+BECKMANN_M_MIN = 1e-6
 
 
 # --------------------------------------------------------------------------- geometry

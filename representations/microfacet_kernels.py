@@ -15,8 +15,8 @@ import numpy as np
 
 from brdfbench.render.drjit_kernels import log1p
 
-from .drjit_kernels import AnalyticKernel, _Geometry, _schlick_fresnel, fresnel_dielectric
-from .microfacet_models import INV_PI, ROUGHNESS_MIN
+from .analytic_terms import BECKMANN_M_MIN as ROUGHNESS_MIN
+from .drjit_kernels import INV_PI, AnalyticKernel, _Geometry, _schlick_fresnel, fresnel_dielectric
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)
 

@@ -40,6 +40,7 @@ from typing import Any, ClassVar
 
 import torch
 
+from .analytic_terms import BECKMANN_M_MIN
 from .analytic import _COMMON_FLOPS, _KD, _KS, AnalyticBRDF, Coefficient
 
 #: Löw et al.'s published A reaches ~5.7e3 (20 LowSmooth and 25 LowMicrofacetFit fits above 1e3): a wider k_s
@@ -51,7 +52,7 @@ Tensor = torch.Tensor
 INV_PI = 1.0 / math.pi
 #: Beckmann m below which the lobe would be evaluated at a floor (its peak 1/(π m²) stays
 #: far from fp32 overflow); no published fit comes near it (smallest: 0.0018).
-ROUGHNESS_MIN = 1e-6
+ROUGHNESS_MIN = BECKMANN_M_MIN
 
 # Fit bounds: each holds every published value (BBM's fits/ files, scanned) with room.
 _ROUGHNESS = Coefficient("roughness", 1, 0.3, 1e-3, 4.0, log=True)  # published 0.0018 .. 2.09

@@ -15,7 +15,6 @@ from brdfbench.render.drjit_kernels import FLOAT32_EPS, log1p
 
 from .analytic_terms import COS_MIN
 from .drjit_kernels import AnalyticKernel, _schlick_fresnel, fresnel_dielectric
-from .ngan_models import AshikhminShirley, AshikhminShirleyIor, Lafortune, Phong, Ward, WardDuer
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)
 
@@ -39,9 +38,13 @@ def cos_power_h(n, g):
 
 
 class NganKernel(AnalyticKernel):
-    """k_d/π + k_s · lobe with the per-material constants of `model_cls.constants`."""
+    """k_d/π + k_s · lobe with the per-material constants of the model class's `constants`."""
 
-    model_cls = None
+    model_name = ""
+
+    def __init__(self, model):
+        self.model_cls = type(model)  # taken from the model: this module imports no model
+        super().__init__(model)
 
     def constants(self, c):
         return self.model_cls.constants(c)
@@ -49,7 +52,7 @@ class NganKernel(AnalyticKernel):
 
 class WardKernel(NganKernel):
     name = "ward"
-    model_cls = Ward
+    model_name = "ward"
 
     def peak(self, g):
         p = self.shape
@@ -62,7 +65,7 @@ class WardKernel(NganKernel):
 
 class WardDuerKernel(WardKernel):
     name = "ward_duer"
-    model_cls = WardDuer
+    model_name = "ward_duer"
 
     def lobe(self, g):
         return self.peak(g) / (g.cos_i * g.cos_o)
@@ -70,7 +73,7 @@ class WardDuerKernel(WardKernel):
 
 class PhongKernel(NganKernel):
     name = "phong"
-    model_cls = Phong
+    model_name = "phong"
 
     def lobe(self, g):
         return cos_power(self.shape["n"], self.shape["norm"], mirror_gap(g))
@@ -78,7 +81,7 @@ class PhongKernel(NganKernel):
 
 class LafortuneKernel(NganKernel):
     name = "lafortune"
-    model_cls = Lafortune
+    model_name = "lafortune"
 
     def lobe(self, g):
         p = self.shape
@@ -93,7 +96,7 @@ class LafortuneKernel(NganKernel):
 
 class AshikhminShirleyKernel(NganKernel):
     name = "ashikhmin_shirley"
-    model_cls = AshikhminShirley
+    model_name = "ashikhmin_shirley"
 
     def fresnel(self, cos_d):
         return _schlick_fresnel(self.shape["f0"], self.shape["one_minus_f0"], cos_d)
@@ -106,12 +109,12 @@ class AshikhminShirleyKernel(NganKernel):
 
 class AshikhminShirleyIorKernel(AshikhminShirleyKernel):
     name = "ashikhmin_shirley_ior"
-    model_cls = AshikhminShirleyIor
+    model_name = "ashikhmin_shirley_ior"
 
     def fresnel(self, cos_d):
         return fresnel_dielectric(self.shape["ior"], cos_d)
 
 
 #: The kernel of each model class (exactly that class: a subclass may change its lobe).
-KERNELS = {k.model_cls: k for k in (WardKernel, WardDuerKernel, PhongKernel, LafortuneKernel,
+KERNELS = {k.model_name: k for k in (WardKernel, WardDuerKernel, PhongKernel, LafortuneKernel,
                                     AshikhminShirleyKernel, AshikhminShirleyIorKernel)}

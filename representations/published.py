@@ -41,6 +41,11 @@ NOT_IMPLEMENTED = {
 }
 
 
+class NoPublishedFit(ConfigError):
+    """This material has no usable published fit in the source: its cell fails, the run goes on
+    (a ConfigError, not bad data: the file itself was read)."""
+
+
 def shipped_sources() -> dict[str, Path]:
     """Source name (the file's stem, lower case) -> shipped `.fit` file."""
     return {p.stem.lower(): p for p in sorted(FITS_DIR.glob("*.fit"))}
@@ -120,18 +125,21 @@ class PublishedFit(Representation):
     def fit(self, target: Material, *, seed: int = 0) -> "PublishedFit":
         fits = load_source(self.source)
         name = self.material or target.name
-        entry = fits.lookup(name)
+        try:
+            entry = fits.lookup(name)
+        except DataError as exc:
+            raise NoPublishedFit(str(exc)) from None
         where = f"{fits.path}:{entry.line}"
         forms = published_forms()
         if entry.model not in forms:
             why = NOT_IMPLEMENTED.get(entry.model, f"no brdfbench model evaluates {entry.model!r} fits")
-            raise DataError(f"{where}: {name}: {why} (models with published fits here: {', '.join(sorted(forms))})")
+            raise NoPublishedFit(f"{where}: {name}: {why} (models with published fits here: {', '.join(sorted(forms))})")
         cls = forms[entry.model]
         try:
             coeffs = cls.from_published(entry.model, list(entry.diffuse), entry.params)
             model = cls().set_coefficients(**coeffs)
         except (ValueError, ConfigError) as exc:
-            raise DataError(f"{where}: {name}: {exc}") from None
+            raise NoPublishedFit(f"{where}: {name}: {exc}") from None
         self.model = model if self.device.type == "cpu" else model.to(self.device)
         self.fit_info = {"published_model": entry.model, "model": cls.NAME, "published_material": name,
                          "source": fits.source, "citation": fits.citation, "line": entry.line}

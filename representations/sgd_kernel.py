@@ -17,7 +17,7 @@ import torch
 from brdfbench.render.drjit_kernels import FLOAT32_EPS, FLOAT32_MAX, INV_PI, expm1, fp32_values, log1p, opaque
 
 from .drjit_kernels import AnalyticKernel, _Geometry
-from .sgd import S_MAX, W_MAX, sgd_constants
+from .sgd_terms import S_MAX, W_MAX, sgd_constants
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)
 

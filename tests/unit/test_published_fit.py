@@ -11,11 +11,11 @@ import pytest
 import torch
 
 from brdfbench import merl, modelio
-from brdfbench.errors import ConfigError, DataError
+from brdfbench.errors import ConfigError
 from brdfbench.protocol import Material
 from brdfbench.testing import adversarial_pairs
 from brdfbench.testing.kit import reference_material
-from brdfbench_representations.published import (NOT_IMPLEMENTED, PublishedFit, load_source, published_forms,
+from brdfbench_representations.published import (NOT_IMPLEMENTED, NoPublishedFit, PublishedFit, load_source, published_forms,
                                                  shipped_sources, source_model)
 
 NBRDF_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "neural-brdf" / "merl"
@@ -41,7 +41,7 @@ def test_every_published_fit_evaluates_or_fails_by_name():
             model = PublishedFit(source=source)
             entry = fits.fits[material]
             if entry.model in NOT_IMPLEMENTED:
-                with pytest.raises(DataError, match=rf"{source}\.fit:{entry.line}: {material}: He, Torrance"):
+                with pytest.raises(NoPublishedFit, match=rf"{source}\.fit:{entry.line}: {material}: He, Torrance"):
                     model.fit(named(material))
                 continue
             model.fit(named(material))
@@ -63,9 +63,9 @@ def test_sources_and_materials_that_do_not_exist_are_one_line(tmp_path):
         PublishedFit(source="ngan_wrd")
     with pytest.raises(ConfigError, match=r"source '.*nope\.fit': no such \.fit file"):
         PublishedFit(source=str(tmp_path / "nope.fit"))
-    with pytest.raises(DataError, match=r"no published fit of 'synth-plastic-green-00' in bagher_sgd \(100 materials\)"):
+    with pytest.raises(NoPublishedFit, match=r"no published fit of 'synth-plastic-green-00' in bagher_sgd \(100 materials\)"):
         PublishedFit().fit(named("synth-plastic-green-00"))
-    with pytest.raises(DataError, match=r"no published fit of 'alum-bronz' in ngan_ward \(86 materials\); did you mean 'alum-bronze'\?"):
+    with pytest.raises(NoPublishedFit, match=r"no published fit of 'alum-bronz' in ngan_ward \(86 materials\); did you mean 'alum-bronze'\?"):
         PublishedFit(source="NGAN_WARD").fit(named("alum-bronz"))
     with pytest.raises(ConfigError, match="material must be a MERL material name or null"):
         PublishedFit(material=3)
@@ -82,11 +82,11 @@ def test_a_users_file_with_bad_lines_fails_only_those_materials(tmp_path):
         encoding="utf-8",
     )
     assert PublishedFit(source=str(path)).fit(named("alum-bronze")).model.NAME == "ward"
-    with pytest.raises(DataError, match=r"mine\.fit:3: chrome: .*roughness"):
+    with pytest.raises(NoPublishedFit, match=r"mine\.fit:3: chrome: .*roughness"):
         PublishedFit(source=str(path)).fit(named("chrome"))
-    with pytest.raises(DataError, match=r"mine\.fit:4: nickel: no brdfbench model evaluates 'Mystery' fits"):
+    with pytest.raises(NoPublishedFit, match=r"mine\.fit:4: nickel: no brdfbench model evaluates 'Mystery' fits"):
         PublishedFit(source=str(path)).fit(named("nickel"))
-    with pytest.raises(DataError, match=r"mine\.fit:5: teflon: line ends"):
+    with pytest.raises(NoPublishedFit, match=r"mine\.fit:5: teflon: line ends"):
         PublishedFit(source=str(path)).fit(named("teflon"))
 
 
