@@ -128,7 +128,7 @@ def test_inspect_of_a_model_naming_another_representation_is_one_line(tmp_path, 
 
 
 @pytest.mark.parametrize("override, named", [
-    ("profile=nope", "profile='nope': no such profile config (expected one of first_look, full)"),
+    ("profile=nope", "profile='nope': no such profile config (expected one of first_look, full, literature)"),
     ("dataset=nope", "dataset='nope': no such dataset config (expected one of "),
     ("representation=lambert,lambret", "representation='lambret': no such representation config"),
 ])
