@@ -37,6 +37,8 @@ COS_MIN = 1e-7
 ALPHA_MIN = 1e-6
 #: Beckmann's m is floored here (by the Beckmann models)
 BECKMANN_M_MIN = 1e-6
+#: GGX: D(θh)/D(0) = 1/2 at tanθh = HALF_WIDTH_PER_ALPHA·α (the fit's roughness estimate and starts).
+HALF_WIDTH_PER_ALPHA = math.sqrt(math.sqrt(2.0) - 1.0)
 
 
 # --------------------------------------------------------------------------- geometry

@@ -45,7 +45,7 @@ from brdfbench.errors import DataError
 from brdfbench.threads import torch_threads
 from brdfbench.protocol import Material, Representation
 
-from .analytic_terms import Geometry, geometry
+from .analytic_terms import HALF_WIDTH_PER_ALPHA, Geometry, geometry
 from .fit_losses import DEFAULT_LOSS, LOSSES, FitLoss, compared, sample_pairs
 from .lambert import weighted_median
 
@@ -63,8 +63,6 @@ FTOL = 1e-10
 GTOL = 1e-9
 #: θd bins (of 90) used for the specular profile: θd < 30°.
 PROFILE_THETA_D_BINS = 30
-#: GGX: D(θh)/D(0) = 1/2 at tanθh = sqrt(√2 − 1) α.
-HALF_WIDTH_PER_ALPHA = math.sqrt(math.sqrt(2.0) - 1.0)
 RESTART_FACTORS = (1.0, 4.0, 0.25, None, 16.0, 1 / 16, 64.0, 1 / 64)  # None: a fixed α = 0.5
 
 

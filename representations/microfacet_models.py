@@ -60,6 +60,12 @@ _F0 = Coefficient("eta", 1, 0.04, 1e-3, 1.0)  # Ngan's "eta" is F0: published 0.
 _IOR = Coefficient("eta", 1, 1.5, 1.01, 1e3, log=True)  # Löw's IoR: published 1.035 .. 99.9996
 _B = Coefficient("B", 1, 1e3, 1e-3, 1e8, log=True)  # published 6.6 .. 8.1e6
 _C = Coefficient("C", 1, 1.0, 1e-3, 100.0, log=True)  # published 0.014 .. 2.67
+#: Domain of the published B, C, η of both ABC models (from_published): (lo, hi, lo_open, meaning)
+_ABC_DOMAIN = {
+    "B": (0.0, math.inf, False, "B >= 0"),
+    "C": (0.0, math.inf, False, "C >= 0"),
+    "eta": (0.0, math.inf, True, "an index of refraction > 0"),
+}
 
 # FLOPS (counted as in analytic.py, per-material constants hoisted; _COMMON_FLOPS holds the
 # half vector, cosθd, h_z², sin²θh and the RGB combine):
@@ -301,11 +307,7 @@ class LowSmooth(AnalyticBRDF):
     @classmethod
     def from_published(cls, bbm_name: str, diffuse: list[float], params: dict[str, Any]) -> dict[str, Any]:
         """Coefficients of a published LowSmooth fit (A → ks)."""
-        return _published(cls, bbm_name, diffuse, params, "A", {
-            "B": (0.0, math.inf, False, "B >= 0"),
-            "C": (0.0, math.inf, False, "C >= 0"),
-            "eta": (0.0, math.inf, True, "an index of refraction > 0"),
-        })
+        return _published(cls, bbm_name, diffuse, params, "A", _ABC_DOMAIN)
 
     def drjit_kernel(self):
         """The model in drjit operations, for this exact class only; drjit is imported here."""
@@ -351,11 +353,7 @@ class LowMicrofacet(AnalyticBRDF):
     @classmethod
     def from_published(cls, bbm_name: str, diffuse: list[float], params: dict[str, Any]) -> dict[str, Any]:
         """Coefficients of a published LowMicrofacetFit fit (A → ks)."""
-        return _published(cls, bbm_name, diffuse, params, "A", {
-            "B": (0.0, math.inf, False, "B >= 0"),
-            "C": (0.0, math.inf, False, "C >= 0"),
-            "eta": (0.0, math.inf, True, "an index of refraction > 0"),
-        })
+        return _published(cls, bbm_name, diffuse, params, "A", _ABC_DOMAIN)
 
     def drjit_kernel(self):
         """The model in drjit operations, for this exact class only; drjit is imported here."""

@@ -63,13 +63,11 @@ import torch
 from brdfbench import reused
 
 from .analytic import _COMMON_FLOPS, _KD, _KS, AnalyticBRDF, Coefficient
-from .analytic_terms import ALPHA_MIN, geometry
+from .analytic_terms import ALPHA_MIN, HALF_WIDTH_PER_ALPHA, geometry
 from .sgd_terms import INV_PI, sgd_constants, sgd_lobe
 
 Tensor = torch.Tensor
 
-#: GGX: D(θh)/D(0) = 1/2 at tanθh = HALF_WIDTH_PER_ALPHA·α (as fitting.py's estimate).
-HALF_WIDTH_PER_ALPHA = math.sqrt(math.sqrt(2.0) - 1.0)
 #: The float32 overflow threshold in log space, for the domain check of published fits.
 LOG_FP32_MAX = math.log(float(torch.finfo(torch.float32).max))
 
