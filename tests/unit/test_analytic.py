@@ -23,6 +23,7 @@ from brdfbench.testing import FAMILIES, adversarial_pairs
 from brdfbench_representations.analytic import BlinnPhong, CookTorrance, GGX
 from brdfbench_metrics.functional import l1_log_cos as l1_log_cos_metric
 from brdfbench_representations.lambert import Lambert
+from quadrature import normal_incidence_albedo
 
 F64 = torch.float64
 MODELS = {"cook_torrance": CookTorrance, "ggx": GGX, "blinn_phong": BlinnPhong}
@@ -123,16 +124,6 @@ def test_unknown_or_bad_coefficient():
 
 
 # --------------------------------------------------------------------------- physics
-
-
-def normal_incidence_albedo(m, n: int = 400_000) -> torch.Tensor:
-    """∫ f cosθo dωo for ωi = normal (azimuthally symmetric: a 1-D midpoint rule in θo)."""
-    t = (torch.arange(n, dtype=F64) + 0.5) * (math.pi / 2 / n)
-    wo = torch.stack((torch.sin(t), torch.zeros_like(t), torch.cos(t)), dim=1)
-    wi = torch.zeros_like(wo)
-    wi[:, 2] = 1.0
-    w = 2 * math.pi * torch.cos(t) * torch.sin(t) * (math.pi / 2 / n)
-    return (m.eval(wi, wo) * w[:, None]).sum(0)
 
 
 def test_diffuse_albedo_is_kd():

@@ -19,10 +19,11 @@ from brdfbench.coords import from_half_diff, spherical_to_vector
 from brdfbench.merl import MerlTable
 from brdfbench.protocol import Material
 from brdfbench.specs import RepresentationSpec
-from brdfbench.testing import FAMILIES, adversarial_pairs, check_representation
+from brdfbench.testing import adversarial_pairs, check_representation
 from brdfbench_representations import microfacet_models as mm
 from brdfbench_representations.analytic_terms import geometry
 from brdfbench_representations.microfacet_models import CookTorrance1982, CookTorranceBeckmann, LowMicrofacet, LowSmooth
+from quadrature import normal_incidence_albedo as rgb_normal_incidence_albedo
 
 F64 = torch.float64
 MODELS = {cls.NAME: cls for cls in (CookTorranceBeckmann, CookTorrance1982, LowSmooth, LowMicrofacet)}
@@ -193,13 +194,8 @@ def _hemisphere_rule(n: int = 200_000):
 
 
 def _normal_albedo_1d(m, n: int = 200_000) -> float:
-    """∫ f_s cosθo dωo for ωi = normal (azimuthally symmetric: a midpoint rule in θo)."""
-    t = (torch.arange(n, dtype=F64) + 0.5) * (math.pi / 2 / n)
-    wo = torch.stack((torch.sin(t), torch.zeros_like(t), torch.cos(t)), dim=1)
-    wi = torch.zeros_like(wo)
-    wi[:, 2] = 1.0
-    w = 2 * math.pi * torch.cos(t) * torch.sin(t) * (math.pi / 2 / n)
-    return float((m.eval(wi, wo)[:, 0] * w).sum())
+    """Channel 0 of the shared quadrature (tests/quadrature.py)."""
+    return float(rgb_normal_incidence_albedo(m, n)[0])
 
 
 @pytest.mark.parametrize("m", [0.05, 0.3, 1.0])

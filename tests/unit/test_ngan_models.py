@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import torch
 
+import brdfbench_representations
 from brdfbench import merl, mitsuba_env, registry
 from brdfbench.coords import from_half_diff, spherical_to_vector
 from brdfbench.merl import MerlTable
@@ -25,9 +26,10 @@ from brdfbench.specs import RepresentationSpec
 from brdfbench.testing import FAMILIES, adversarial_pairs, check_representation
 from brdfbench_representations.ngan_models import (MODELS, AshikhminShirley, AshikhminShirleyIor, Lafortune, Phong,
                                                    Ward, WardDuer)
+from quadrature import normal_incidence_albedo as rgb_normal_incidence_albedo
 
 F64 = torch.float64
-FITS = Path("/work/shared/reference/published_fits")
+FITS = Path(brdfbench_representations.__file__).with_name("published_fits")  # the shipped copies
 TAGS = frozenset({"isotropic", "reciprocal", "fittable", "analytic"})
 CLASSES = {"ward": "Ward", "ward_duer": "WardDuer", "phong": "Phong", "lafortune": "Lafortune",
            "ashikhmin_shirley": "AshikhminShirley", "ashikhmin_shirley_ior": "AshikhminShirleyIor"}
@@ -161,13 +163,8 @@ def test_lafortune_depends_only_on_the_direction_of_c():
 
 
 def normal_incidence_albedo(m, n: int = 400_000) -> float:
-    """∫ f cosθo dωo for ωi = normal (azimuthally symmetric: a 1-D midpoint rule in θo), channel 0."""
-    t = (torch.arange(n, dtype=F64) + 0.5) * (math.pi / 2 / n)
-    wo = torch.stack((torch.sin(t), torch.zeros_like(t), torch.cos(t)), dim=1)
-    wi = torch.zeros_like(wo)
-    wi[:, 2] = 1.0
-    w = 2 * math.pi * torch.cos(t) * torch.sin(t) * (math.pi / 2 / n)
-    return float((m.eval(wi, wo)[:, 0] * w).sum())
+    """Channel 0 of the shared quadrature (tests/quadrature.py)."""
+    return float(rgb_normal_incidence_albedo(m, n)[0])
 
 
 def directional_albedo(m, theta_i: float, n: int = 1000) -> float:
