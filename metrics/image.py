@@ -3,7 +3,7 @@
 Each concrete class fixes a metric and a space ("ldr" or "hdr", see `image_functional`), so
 the registry builds it without arguments and its unit is exact; keyword arguments are the
 functional metric's options, e.g. `PSNRHDR(data_range=4.0)` or `FLIPLDR(exposure=1.0)`.
-`device=` (e.g. `SSIMLDR(device="cuda")`) is where MSE, RMSE, MAE, PSNR and SSIM compute
+`device=` (e.g. `SSIMLDR(device="cuda")`) is where MSE, RMSE, MAE, MAPE, PSNR and SSIM compute
 (see `image_functional`); FLIP is numpy and always computes on the CPU, whatever `device` says.
 """
 
@@ -55,6 +55,12 @@ class MAE(ImageMetric):
     fn = staticmethod(IF.mae)
 
 
+class MAPE(ImageMetric):
+    fn = staticmethod(IF.mape)
+    unit = "%"
+    higher_is_better = False
+
+
 class PSNR(ImageMetric):
     fn = staticmethod(IF.psnr)
     unit = "dB"
@@ -104,6 +110,14 @@ class MAELDR(MAE):
 class MAEHDR(MAE):
     space = "hdr"
     unit = "radiance"
+
+
+class MAPELDR(MAPE):
+    space = "ldr"
+
+
+class MAPEHDR(MAPE):
+    space = "hdr"
 
 
 class PSNRLDR(PSNR):

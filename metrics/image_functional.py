@@ -13,7 +13,7 @@ A batch reduces to the mean of its per-image values (`reduction="none"` keeps th
 set of images scores the same in one call or in many. PSNR is capped at `max_db` (100 dB by
 default) so that one exact image does not make a mean over images infinite.
 
-Devices: MSE, RMSE, MAE, PSNR and SSIM are torch and take `device=` (default: where `pred` lies;
+Devices: MSE, RMSE, MAE, MAPE, PSNR and SSIM are torch and take `device=` (default: where `pred` lies;
 a CUDA device computes there in fp64, and the figures agree with the CPU's to rounding);
 their values (and maps) come back on `pred`'s device. FLIP is the `flip-evaluator` package
 (numpy, on the CPU): it takes no device and always runs on the CPU.
@@ -32,6 +32,8 @@ SPACES = ("ldr", "hdr")
 SSIM_WINDOW, SSIM_SIGMA, SSIM_K1, SSIM_K2 = 11, 1.5, 0.01, 0.03
 FLIP_PPD = 67.0
 PSNR_MAX_DB = 100.0
+#: MAPE's ε: |p − t| / (t + ε), so dark pixels (t → 0) do not dominate; 0.01 of the LDR range.
+MAPE_EPS = 1e-2
 #: a reference whose luminance never exceeds this has no exposure range for HDR-FLIP.
 _DARK = 1e-30
 
@@ -112,7 +114,7 @@ def _data_range(name: str, t: torch.Tensor, space: str, data_range: float | None
     return peak
 
 
-# --------------------------------------------------------------------------- MSE, RMSE, MAE, PSNR
+# --------------------------------------------------------------------------- MSE, RMSE, MAE, MAPE, PSNR
 
 
 def _mse_per_image(p: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
@@ -138,6 +140,20 @@ def mae(pred, target, *, space: str, exposure: float = 0.0, reduction: str = "me
     """Mean absolute error over pixels and channels (a batch averages the per-image MAEs)."""
     p, t, single = _in_space("mae", pred, target, space, exposure, device)
     return _home(_reduce((p - t).abs().flatten(1).mean(dim=1), single, reduction), pred)
+
+
+def mape(pred, target, *, space: str, exposure: float = 0.0, eps: float = MAPE_EPS, reduction: str = "mean",
+         device: "torch.device | str | None" = None) -> torch.Tensor:
+    """Mean absolute percentage error, 100 · mean over pixels and channels of |p − t| / (t + ε),
+    in % (the relative error of Sztrajman et al.'s convergence plots, with ε keeping dark
+    pixels finite; a batch averages the per-image values). HDR needs a non-negative target."""
+    if not (isinstance(eps, (int, float)) and math.isfinite(eps) and eps > 0):
+        raise ValueError(f"mape: eps must be a positive finite number, got {eps!r}")
+    p, t, single = _in_space("mape", pred, target, space, exposure, device)
+    if space == "hdr":
+        _nonnegative("mape", target=t)
+    values = 100.0 * ((p - t).abs() / (t + eps)).flatten(1).mean(dim=1)
+    return _home(_reduce(values, single, reduction), pred)
 
 
 def psnr(pred, target, *, space: str, exposure: float = 0.0, data_range: float | None = None,

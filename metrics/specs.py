@@ -53,6 +53,8 @@ RMSE_LDR = _image("rmse_ldr", "Image RMSE of tone-mapped (sRGB, [0, 1]) images",
 RMSE_HDR = _image("rmse_hdr", "Image RMSE of linear radiance", "RMSEHDR", "radiance", False)
 MAE_LDR = _image("mae_ldr", "Image MAE of tone-mapped (sRGB, [0, 1]) images", "MAELDR", "1", False)
 MAE_HDR = _image("mae_hdr", "Image MAE of linear radiance", "MAEHDR", "radiance", False)
+MAPE_LDR = _image("mape_ldr", "Image MAPE, 100·mean |p − t|/(t + 0.01), of tone-mapped images", "MAPELDR", "%", False)
+MAPE_HDR = _image("mape_hdr", "Image MAPE, 100·mean |p − t|/(t + 0.01), of linear radiance", "MAPEHDR", "%", False)
 PSNR_LDR = _image("psnr_ldr", "PSNR of tone-mapped images, data range 1, capped at 100 dB", "PSNRLDR", "dB", True)
 PSNR_HDR = _image("psnr_hdr", "PSNR of linear radiance, data range = target's max, capped at 100 dB", "PSNRHDR",
                   "dB", True)

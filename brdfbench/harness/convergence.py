@@ -12,8 +12,9 @@ through shared directions; each rung is a separate render. With per-sample varia
 the expected squared error at n spp is σ²(1/n + 1/N) for an N-spp reference: at the
 default top rung the reference adds 1/16 of the rung's own noise.
 
-Per rung the harness records the RMSE and relative MSE of HDR radiance and the render
-time (so error against time is available); over the rungs, the least-squares slope of
+Per rung the harness records the RMSE, MAE, MAPE and PSNR of HDR radiance (the four
+panels of Sztrajman et al.'s convergence figures), the relative MSE and the render time
+(so error against time is available); over the rungs, the least-squares slope of
 log RMSE against log spp (−½ for an unbiased estimator of finite variance; flatter when
 rare fireflies dominate, since a few spp seldom catch them) and the RMSE at 1 spp implied
 by the 1/√spp law fitted to all rungs, a one-number efficiency of the sampler.
@@ -39,6 +40,8 @@ from .render import MONTE_CARLO, RenderConfig, cached_render, check_simulation
 
 #: ε of the relative MSE (p − r)² / (r² + ε), as in denoising work (Rousselle et al. 2011).
 RELMSE_EPS = 1e-2
+#: The registered image metrics measured at every rung, in HDR radiance.
+RUNG_METRICS = ("rmse_hdr", "mae_hdr", "mape_hdr", "psnr_hdr")
 
 
 # --------------------------------------------------------------------------- configuration
@@ -64,7 +67,8 @@ def check_config(harness, scene) -> None:
     """Up-front checks of a convergence harness on `scene` (before any fitting)."""
     if harness.metrics:
         raise ConfigError(f"harness.metrics={list(harness.metrics)!r} must be empty for harness=convergence: it "
-                          "always measures rmse_hdr, relmse_hdr and render_time at each spp of harness.spp_ladder")
+                          f"always measures {', '.join(RUNG_METRICS)}, relmse_hdr and render_time at each spp of "
+                          "harness.spp_ladder")
     if harness.spp is not None:
         raise ConfigError(f"harness.spp={harness.spp!r} must be null for harness=convergence: "
                           "harness.spp_ladder and harness.reference_spp set the samples per pixel")
@@ -92,13 +96,20 @@ def derive_seed(seed: int, tag: str) -> int:
 # --------------------------------------------------------------------------- errors and the fit
 
 
-def rmse_hdr(image: torch.Tensor, reference: torch.Tensor) -> float:
-    """RMSE of HDR radiance, by the registered `rmse_hdr` metric (the core names no metric module)."""
+def image_metric(name: str, image: torch.Tensor, reference: torch.Tensor) -> Measurement:
+    """One registered image metric of `image` against `reference`, with the spec's unit and
+    direction (the core names no metric module)."""
     from .. import registry
 
-    metric = registry.get("metrics", "rmse_hdr").load()()
+    spec = registry.get("metrics", name)
+    metric = spec.load()()
     metric.update(image, reference)
-    return float(metric.compute())
+    return Measurement(name, float(metric.compute()), spec.unit, spec.higher_is_better)
+
+
+def rmse_hdr(image: torch.Tensor, reference: torch.Tensor) -> float:
+    """RMSE of HDR radiance, by the registered `rmse_hdr` metric."""
+    return image_metric("rmse_hdr", image, reference).value
 
 
 def relative_mse(image: torch.Tensor, reference: torch.Tensor, eps: float = RELMSE_EPS) -> float:
@@ -181,7 +192,7 @@ class ConvergenceHarness:
         )
 
     def measure(self, model: Representation, material: Material, label: str) -> list[Measurement]:
-        """Per rung: rmse_hdr, relmse_hdr, render_time; then convergence_slope and convergence_rmse_1spp."""
+        """Per rung: RUNG_METRICS, relmse_hdr, render_time; then convergence_slope and convergence_rmse_1spp."""
         reference = self.reference(model, material, label)
         out, errors = [], []
         for n, simulator in self.rungs.items():
@@ -190,9 +201,12 @@ class ConvergenceHarness:
             t0 = time.perf_counter()
             image = simulator.render(model, seed=derive_seed(self.seed, f"spp={n}"), **who)
             seconds = time.perf_counter() - t0
-            errors.append(rmse_hdr(image, reference))
+            black = not bool((reference > 0).any())  # PSNR has no HDR data range then
+            rung = [image_metric(name, image, reference) for name in RUNG_METRICS
+                    if not (black and name == "psnr_hdr")]
+            errors.append(rung[0].value)
+            out += [Measurement(m.metric, m.value, m.unit, m.higher_is_better, spp=n) for m in rung]
             out += [
-                Measurement("rmse_hdr", errors[-1], "radiance", False, spp=n),
                 Measurement("relmse_hdr", relative_mse(image, reference), "1", False, spp=n),
                 Measurement("render_time", seconds, "s", False, spp=n),
             ]

@@ -60,6 +60,10 @@ def test_a_lambertian_with_cosine_sampling_converges_as_one_over_root_spp(tmp_pa
     # 64× the samples: 8× less error in expectation; at least 5× whatever the seed
     assert got["rmse_hdr@spp=64"] < got["rmse_hdr@spp=1"] / 5
     assert got["relmse_hdr@spp=64"] < got["relmse_hdr@spp=1"] / 25
+    # MAE and MAPE fall like RMSE (absolute errors: 8× in expectation); PSNR rises by ~18 dB
+    assert got["mae_hdr@spp=64"] < got["mae_hdr@spp=1"] / 5
+    assert got["mape_hdr@spp=64"] < got["mape_hdr@spp=1"] / 5
+    assert got["psnr_hdr@spp=64"] > got["psnr_hdr@spp=1"] + 12
     assert all(got[f"render_time@spp={n}"] > 0 for n in LADDER)
     assert got["convergence_rmse_1spp"] == pytest.approx(got["rmse_hdr@spp=1"], rel=0.3)
 
@@ -139,6 +143,11 @@ def test_rungs_land_in_the_store_per_sampler_and_in_the_leaderboard(tmp_path, sy
         assert rows[("rmse_hdr", n)].unit == "radiance" and not rows[("rmse_hdr", n)].higher_is_better
         assert rows[("relmse_hdr", n)].unit == "1"
         assert rows[("render_time", n)].unit == "s"
+        # the four panels of Sztrajman et al.'s convergence figures: MAE, RMSE, MAPE, PSNR
+        assert rows[("mae_hdr", n)].unit == "radiance" and not rows[("mae_hdr", n)].higher_is_better
+        assert rows[("mape_hdr", n)].unit == "%" and not rows[("mape_hdr", n)].higher_is_better
+        assert rows[("psnr_hdr", n)].unit == "dB" and rows[("psnr_hdr", n)].higher_is_better
+        assert rows[("mae_hdr", n)].value <= rows[("rmse_hdr", n)].value + 1e-12
     assert {("convergence_slope", 0), ("convergence_rmse_1spp", 0), ("fit_time", 0)} <= set(rows)
     references = list((tmp_path / "renders" / "sphere_envmap" / "convergence").rglob("reference/lambert/*.exr"))
     assert len(references) == 1
@@ -229,3 +238,35 @@ def test_the_leaderboard_has_a_convergence_section_per_sampler_beside_the_others
     line = next(line for line in cosine.splitlines() if line.startswith("| `ggx`"))
     assert "| 0.6 | 0.3 | 0.15 | -0.5 |" in line
     assert "![" not in text  # no figure was written for this scene
+
+
+def test_the_figure_has_a_panel_per_error_of_the_papers_plots_and_copes_with_older_rows():
+    from brdfbench_leaderboard import plots
+
+    old = _board_rows()
+    figs = plots.convergence_figures(old)
+    (fig,) = figs.values()
+    axes = fig.axes
+    titled = {ax.get_ylabel().split(",")[0]: ax for ax in axes if ax.get_xlabel() == "samples per pixel"}
+    assert set(titled) == {"RMSE of HDR radiance", "MAE of HDR radiance", "MAPE of HDR radiance (%)",
+                           "PSNR of HDR radiance (dB)"}
+    assert any(ax.get_xlabel().startswith("render time") and len(ax.lines) == 3 for ax in axes)
+    # rows stored before MAE/MAPE/PSNR were measured: those panels say so instead of plotting
+    assert not titled["MAE of HDR radiance"].lines and titled["MAE of HDR radiance"].texts
+    assert len(titled["RMSE of HDR radiance"].lines) == 3 + 1  # three curves and the −½ guide
+
+    extra = []
+    for r in old[old.metric == "rmse_hdr"].to_dict("records"):
+        extra += [dict(r, metric="mae_hdr", value=0.8 * r["value"]), dict(r, metric="mape_hdr", value=50 * r["value"], unit="%"),
+                  dict(r, metric="psnr_hdr", value=-20 * math.log10(r["value"]), unit="dB", higher_is_better=True)]
+    (fig,) = plots.convergence_figures(pd.concat([old, pd.DataFrame(extra)], ignore_index=True)).values()
+    titled = {ax.get_ylabel().split(",")[0]: ax for ax in fig.axes if ax.get_xlabel() == "samples per pixel"}
+    for name in ("MAE of HDR radiance", "MAPE of HDR radiance (%)", "PSNR of HDR radiance (dB)"):
+        assert len(titled[name].lines) == 3 and not titled[name].texts
+    mae = titled["MAE of HDR radiance"]
+    assert mae.get_xscale() == mae.get_yscale() == "log"
+    assert titled["PSNR of HDR radiance (dB)"].get_yscale() == "linear"
+    # one colour per curve on every panel
+    colours = [tuple(line.get_color() for line in ax.lines[:3]) for ax in
+               (titled["MAE of HDR radiance"], titled["PSNR of HDR radiance (dB)"])]
+    assert colours[0] == colours[1]
