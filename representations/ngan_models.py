@@ -265,6 +265,24 @@ class Phong(NganBRDF):
 # --------------------------------------------------------------------------- Lafortune
 
 
+def lafortune_terms(g: Geometry) -> dict[str, Tensor]:
+    """The per-pair parts of a generalised cosine lobe, shared by all its lobes: 1 − cos α
+    (`mirror_gap`), 1 − ωi·ωo, 1 − cosθi cosθo (from non-negative parts) and cosθi cosθo."""
+    dc = g.cos_i - g.cos_o
+    cc = g.cos_i * g.cos_o
+    return {"gap": mirror_gap(g), "one_minus_dot": 2.0 * (1.0 - g.cos_d * g.cos_d),
+            "one_minus_cc": 0.5 * ((dc * dc) + (g.sin2_i + g.sin2_o)), "cc": cc}
+
+
+def lafortune_lobe(p: dict[str, Tensor], t: dict[str, Tensor]) -> Tensor:
+    """One normalised lobe (n + 2)/(2π) (1 − y)^n from its constants (`Lafortune.constants`)
+    and the shared terms (`lafortune_terms`)."""
+    y = (p["w_forward"] * t["gap"] + p["w_retro"] * t["one_minus_dot"]
+         + p["w_normal"] * t["one_minus_cc"] + p["w_cc"] * t["cc"])
+    return cos_power(p["n"], p["norm"], y)
+
+
+
 class Lafortune(NganBRDF):
     """One isotropic generalised cosine lobe of Lafortune, Foo, Torrance and Greenberg,
     "Non-linear approximation of reflectance functions" (SIGGRAPH 1997), with
@@ -323,14 +341,7 @@ class Lafortune(NganBRDF):
 
     @classmethod
     def lobe(cls, g, c):
-        p = cls.constants(c)
-        dc = g.cos_i - g.cos_o
-        cc = g.cos_i * g.cos_o
-        one_minus_cc = 0.5 * ((dc * dc) + (g.sin2_i + g.sin2_o))
-        one_minus_dot = 2.0 * (1.0 - g.cos_d * g.cos_d)
-        y = (p["w_forward"] * mirror_gap(g) + p["w_retro"] * one_minus_dot
-             + p["w_normal"] * one_minus_cc + p["w_cc"] * cc)
-        return cos_power(p["n"], p["norm"], y)
+        return lafortune_lobe(cls.constants(c), lafortune_terms(g))
 
     @classmethod
     def init_shape(cls, alpha):

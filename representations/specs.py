@@ -133,6 +133,20 @@ LAFORTUNE = RepresentationSpec(
     tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
     check_params=QUICK_FIT,  # the kit's quick run: a short fit
 )
+LAFORTUNE2 = RepresentationSpec(
+    name="lafortune2",
+    description="Two isotropic Lafortune et al. 1997 lobes, each with Ngan et al.'s normalisation; L1-log-cos fit",
+    target="brdfbench_representations.lafortune_lobes:Lafortune2",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
+LAFORTUNE3 = RepresentationSpec(
+    name="lafortune3",
+    description="Three isotropic Lafortune et al. 1997 lobes, each with Ngan et al.'s normalisation; L1-log-cos fit",
+    target="brdfbench_representations.lafortune_lobes:Lafortune3",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
 ASHIKHMIN_SHIRLEY = RepresentationSpec(
     name="ashikhmin_shirley",
     description="Ashikhmin-Shirley 2000 specular term, isotropic, Schlick F(F0) (as Ngan et al. 2005 fitted it); L1-log-cos fit",

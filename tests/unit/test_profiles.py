@@ -57,7 +57,7 @@ def test_literature_profile_runs_every_published_source_and_its_models():
     published = {j["representation.params.source"] for j in jobs if j["representation"] == "published_fit"}
     assert published == set(shipped_sources()) - {"ngan_he"}
     refitted = {j["representation"] for j in jobs if j["representation"] != "published_fit"}
-    assert {source_model(s) for s in published} | {"ggx", "nbrdf"} == refitted
+    assert {source_model(s) for s in published} | {"ggx", "nbrdf", "lafortune2", "lafortune3"} == refitted
 
 
 def test_full_profile_is_the_previous_default():
