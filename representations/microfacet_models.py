@@ -40,12 +40,12 @@ from typing import Any, ClassVar
 
 import torch
 
-from .analytic_terms import BECKMANN_M_MIN
 from .analytic import _COMMON_FLOPS, _KD, _KS, AnalyticBRDF, Coefficient
+from .analytic_terms import BECKMANN_M_MIN, HALF_WIDTH_PER_ALPHA, Geometry, fresnel_dielectric, schlick_fresnel
+from .published_params import PublishedParams
 
 #: Löw et al.'s published A reaches ~5.7e3 (20 LowSmooth and 25 LowMicrofacetFit fits above 1e3): a wider k_s
 _KS_WIDE = Coefficient("ks", 3, 1.0, 1e-8, 1e4, log=True)
-from .analytic_terms import Geometry, fresnel_dielectric, schlick_fresnel
 
 Tensor = torch.Tensor
 
@@ -120,62 +120,38 @@ def quarter_dp2(g: Geometry) -> Tensor:
 # --------------------------------------------------------------------------- published parameters
 
 
-def _fail(cls, bbm_name: str, what: str) -> ValueError:
-    return ValueError(f"{cls.NAME}: published {bbm_name} fit: {what}")
-
-
-def _number(cls, bbm_name: str, key: str, value: Any) -> float:
-    if isinstance(value, (list, tuple)) and len(value) == 1:
-        value = value[0]
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise _fail(cls, bbm_name, f"parameter {key!r} must be a number, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise _fail(cls, bbm_name, f"parameter {key!r} must be finite, got {value!r}")
-    return v
-
-
-def _rgb(cls, bbm_name: str, key: str, value: Any) -> list[float]:
-    values = list(value) if isinstance(value, (list, tuple)) else [value]
-    if len(values) == 1:
-        values = values * 3
-    if len(values) != 3:
-        raise _fail(cls, bbm_name, f"parameter {key!r} needs 1 or 3 values (RGB), got {len(values)}: {value!r}")
-    out = [_number(cls, bbm_name, key, v) for v in values]
-    if min(out) < 0:
-        raise _fail(cls, bbm_name, f"parameter {key!r} must be non-negative, got {value!r}")
-    return out
-
-
 def _published(cls, bbm_name: str, diffuse: Any, params: dict[str, Any], rgb: str,
                domain: dict[str, tuple[float, float, bool, str]]) -> dict[str, Any]:
     """kd, ks and the shape from a published fit: `rgb` names the RGB scale (→ ks); `domain`
     maps each scalar parameter (same name as its coefficient) to (lo, hi, lo_open, meaning)."""
-    if bbm_name not in cls.PUBLISHED_AS:
-        raise ValueError(f"{cls.NAME}: cannot evaluate a published {bbm_name!r} fit; "
-                         f"it evaluates {', '.join(cls.PUBLISHED_AS)}")
-    if not isinstance(params, dict):
-        raise _fail(cls, bbm_name, f"parameters must be a dict, got {type(params).__name__}")
-    expected = [rgb, *domain]
-    missing = [k for k in expected if k not in params]
-    if missing:
-        raise _fail(cls, bbm_name, f"missing parameter(s) {', '.join(map(repr, missing))}; expected {', '.join(expected)}")
-    unknown = [k for k in params if k not in expected]
-    if unknown:
-        raise _fail(cls, bbm_name, f"unknown parameter(s) {', '.join(map(repr, unknown))}; expected {', '.join(expected)}")
-    out: dict[str, Any] = {"kd": _rgb(cls, bbm_name, "diffuse albedo", diffuse), "ks": _rgb(cls, bbm_name, rgb, params[rgb])}
+    p = PublishedParams(cls, bbm_name, params)
+    p.expect([rgb, *domain])
+    out: dict[str, Any] = {"kd": p.diffuse(diffuse), "ks": p.rgb(rgb)}
     for key, (lo, hi, lo_open, meaning) in domain.items():
-        v = _number(cls, bbm_name, key, params[key])
-        if v < lo or (lo_open and v == lo) or v > hi:
-            raise _fail(cls, bbm_name, f"parameter {key!r} = {params[key]!r} is outside the model's domain ({meaning})")
-        out[key] = v
+        out[key] = p.number(key)
+        p.within(key, out[key], lo, hi, meaning, lo_open=lo_open)
     return out
 
 
 # --------------------------------------------------------------------------- the models
 
 
-class CookTorranceBeckmann(AnalyticBRDF):
+class _MicrofacetModel(AnalyticBRDF):
+    """A model of this module: `KERNEL` names its drjit twin in `microfacet_kernels`."""
+
+    KERNEL: ClassVar[str] = ""
+
+    def drjit_kernel(self):
+        """The model in drjit operations, for the exact class that names KERNEL only (a
+        subclass may change `lobe`); drjit is imported here, not with the representation."""
+        if "KERNEL" not in type(self).__dict__:
+            return None
+        from . import microfacet_kernels
+
+        return getattr(microfacet_kernels, self.KERNEL)(self)
+
+
+class CookTorranceBeckmann(_MicrofacetModel):
     """Cook-Torrance as fitted by Ngan, Durand and Matusik ("Experimental Analysis of BRDF
     Models", EGSR 2005).
 
@@ -190,6 +166,7 @@ class CookTorranceBeckmann(AnalyticBRDF):
     """
 
     NAME = "cook_torrance_beckmann"
+    KERNEL = "CookTorranceBeckmannKernel"
     PUBLISHED_AS: ClassVar[tuple[str, ...]] = ("NganCookTorrance",)
     COEFFS = (_KD, _KS, _ROUGHNESS, _F0)
     FLOPS = _COMMON_FLOPS + _BECKMANN_FLOPS + _VGROOVE_FLOPS + _SCHLICK_FLOPS + 2
@@ -213,16 +190,8 @@ class CookTorranceBeckmann(AnalyticBRDF):
             "eta": (0.0, 1.0, False, "a reflectance F0 in [0, 1]"),
         })
 
-    def drjit_kernel(self):
-        """The model in drjit operations, for this exact class only; drjit is imported here."""
-        if type(self) is not CookTorranceBeckmann:
-            return None
-        from .microfacet_kernels import CookTorranceBeckmannKernel
 
-        return CookTorranceBeckmannKernel(self)
-
-
-class CookTorrance1982(AnalyticBRDF):
+class CookTorrance1982(_MicrofacetModel):
     """The original Cook-Torrance model (Cook and Torrance, "A Reflectance Model for Computer
     Graphics", ACM TOG 1(1), 1982) as Löw et al. 2012 fitted it.
 
@@ -237,6 +206,7 @@ class CookTorrance1982(AnalyticBRDF):
     """
 
     NAME = "cook_torrance_1982"
+    KERNEL = "CookTorrance1982Kernel"
     PUBLISHED_AS: ClassVar[tuple[str, ...]] = ("LowCookTorrance",)
     COEFFS = (_KD, _KS, _ROUGHNESS, _IOR)
     FLOPS = _COMMON_FLOPS + _BECKMANN_FLOPS + _VGROOVE_FLOPS + _DIELECTRIC_FLOPS + 2
@@ -260,16 +230,8 @@ class CookTorrance1982(AnalyticBRDF):
             "eta": (0.0, math.inf, True, "an index of refraction > 0"),
         })
 
-    def drjit_kernel(self):
-        """The model in drjit operations, for this exact class only; drjit is imported here."""
-        if type(self) is not CookTorrance1982:
-            return None
-        from .microfacet_kernels import CookTorrance1982Kernel
 
-        return CookTorrance1982Kernel(self)
-
-
-class LowSmooth(AnalyticBRDF):
+class LowSmooth(_MicrofacetModel):
     """The smooth-surface model of Löw, Kronander, Ynnerman and Unger ("BRDF Models for
     Accurate and Efficient Rendering of Glossy Surfaces", ACM TOG 31(1), 2012, §4).
 
@@ -285,6 +247,7 @@ class LowSmooth(AnalyticBRDF):
     """
 
     NAME = "low_smooth"
+    KERNEL = "LowSmoothKernel"
     PUBLISHED_AS: ClassVar[tuple[str, ...]] = ("LowSmooth",)
     COEFFS = (_KD, _KS_WIDE, _B, _C, _IOR)
     # D_p²/4 2; S: 4B·, log1p, ×(−C), exp 4; projected cos: cos²θi, cos²θo, +, ×½, +, min, √ 7;
@@ -301,24 +264,16 @@ class LowSmooth(AnalyticBRDF):
 
     @classmethod
     def init_shape(cls, alpha):
-        # Half width of GGX(α) (tanθ½ = 0.6436 α) with C = 1: near normal incidence D_p ≈ 2θh.
-        return {"B": 1.0 / (4.0 * (0.6436 * alpha) ** 2), "C": 1.0, "eta": 1.5}
+        # Half width of GGX(α) (tanθ½ = HALF_WIDTH_PER_ALPHA·α) with C = 1: near normal incidence D_p ≈ 2θh.
+        return {"B": 1.0 / (4.0 * (HALF_WIDTH_PER_ALPHA * alpha) ** 2), "C": 1.0, "eta": 1.5}
 
     @classmethod
     def from_published(cls, bbm_name: str, diffuse: list[float], params: dict[str, Any]) -> dict[str, Any]:
         """Coefficients of a published LowSmooth fit (A → ks)."""
         return _published(cls, bbm_name, diffuse, params, "A", _ABC_DOMAIN)
 
-    def drjit_kernel(self):
-        """The model in drjit operations, for this exact class only; drjit is imported here."""
-        if type(self) is not LowSmooth:
-            return None
-        from .microfacet_kernels import LowSmoothKernel
 
-        return LowSmoothKernel(self)
-
-
-class LowMicrofacet(AnalyticBRDF):
+class LowMicrofacet(_MicrofacetModel):
     """The microfacet model of Löw, Kronander, Ynnerman and Unger ("BRDF Models for Accurate
     and Efficient Rendering of Glossy Surfaces", ACM TOG 31(1), 2012, §5), as the fits of their
     supplemental material use it.
@@ -333,6 +288,7 @@ class LowMicrofacet(AnalyticBRDF):
     """
 
     NAME = "low_microfacet"
+    KERNEL = "LowMicrofacetKernel"
     PUBLISHED_AS: ClassVar[tuple[str, ...]] = ("LowMicrofacetFit",)
     COEFFS = (_KD, _KS_WIDE, _B, _C, _IOR)
     # 1 − cosθh: √ (shared with G), +1, ÷ 3; S: B·, log1p, ×(−C), exp 4; horizon select 1;
@@ -347,18 +303,10 @@ class LowMicrofacet(AnalyticBRDF):
 
     @classmethod
     def init_shape(cls, alpha):
-        # Half width of GGX(α) (tanθ½ = 0.6436 α) with C = 1: 1 − cosθh ≈ θh²/2.
-        return {"B": 2.0 / (0.6436 * alpha) ** 2, "C": 1.0, "eta": 1.5}
+        # Half width of GGX(α) (tanθ½ = HALF_WIDTH_PER_ALPHA·α) with C = 1: 1 − cosθh ≈ θh²/2.
+        return {"B": 2.0 / (HALF_WIDTH_PER_ALPHA * alpha) ** 2, "C": 1.0, "eta": 1.5}
 
     @classmethod
     def from_published(cls, bbm_name: str, diffuse: list[float], params: dict[str, Any]) -> dict[str, Any]:
         """Coefficients of a published LowMicrofacetFit fit (A → ks)."""
         return _published(cls, bbm_name, diffuse, params, "A", _ABC_DOMAIN)
-
-    def drjit_kernel(self):
-        """The model in drjit operations, for this exact class only; drjit is imported here."""
-        if type(self) is not LowMicrofacet:
-            return None
-        from .microfacet_kernels import LowMicrofacetKernel
-
-        return LowMicrofacetKernel(self)

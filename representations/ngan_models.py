@@ -28,6 +28,7 @@ import torch
 
 from .analytic import _KD, _KS, AnalyticBRDF, Coefficient
 from .analytic_terms import ALPHA_MIN, COS_MIN, Geometry, fresnel_dielectric, schlick_fresnel
+from .published_params import PublishedParams
 
 Tensor = torch.Tensor
 
@@ -74,29 +75,6 @@ def cos_power_h(n: Tensor, g: Geometry) -> Tensor:
     return torch.where(g.cos2_h > 0, p, torch.zeros_like(p))
 
 
-def _number(model: str, bbm: str, key: str, value: Any) -> float:
-    v = value
-    if isinstance(v, (list, tuple)):
-        if len(v) != 1:
-            raise ValueError(f"{model}: {bbm} parameter {key!r} must be one number, got {value!r}")
-        v = v[0]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
-        raise ValueError(f"{model}: {bbm} parameter {key!r} must be a finite number, got {value!r}")
-    return float(v)
-
-
-def _rgb(model: str, bbm: str, key: str, value: Any) -> list[float]:
-    values = list(value) if isinstance(value, (list, tuple)) else [value]
-    if len(values) == 1:
-        values = values * 3
-    if len(values) != 3:
-        raise ValueError(f"{model}: {bbm} parameter {key!r} must be RGB (3 values), got {len(values)}: {value!r}")
-    out = [_number(model, bbm, key, v) for v in values]
-    if min(out) < 0:
-        raise ValueError(f"{model}: {bbm} parameter {key!r} must be non-negative, got {value!r}")
-    return out
-
-
 # --------------------------------------------------------------------------- the base
 
 
@@ -125,28 +103,18 @@ class NganBRDF(AnalyticBRDF):
         (BBM's parameter names). A missing, unknown, misshapen or out-of-domain parameter
         raises ValueError naming it; shape values must lie within the fit bounds (COEFFS
         are wide enough for every published value)."""
-        if bbm_name not in cls.PUBLISHED_AS:
-            raise ValueError(f"{cls.NAME}: evaluates {', '.join(cls.PUBLISHED_AS)} fits, not {bbm_name!r}")
-        unknown = sorted(set(params) - set(cls.PUBLISHED_PARAMS))
-        if unknown:
-            raise ValueError(f"{cls.NAME}: unknown {bbm_name} parameter(s) {', '.join(map(repr, unknown))}; "
-                             f"expected {', '.join(cls.PUBLISHED_PARAMS)}")
-        missing = [k for k in cls.PUBLISHED_PARAMS if k not in params]
-        if missing:
-            raise ValueError(f"{cls.NAME}: {bbm_name} parameter(s) {', '.join(map(repr, missing))} missing")
-        out: dict[str, Any] = {"kd": _rgb(cls.NAME, bbm_name, "diffuse (Lambertian albedo)", diffuse)}
+        p = PublishedParams(cls, bbm_name, params)
+        p.expect(cls.PUBLISHED_PARAMS)
+        out: dict[str, Any] = {"kd": p.diffuse(diffuse)}
         spec = {c.name: c for c in cls.COEFFS}
         shape: dict[str, float] = {}
         for key, name in cls.PUBLISHED_PARAMS.items():
             if name == "ks":
-                out["ks"] = _rgb(cls.NAME, bbm_name, key, params[key])
+                out["ks"] = p.rgb(key)
                 continue
-            v = _number(cls.NAME, bbm_name, key, params[key])
             c = spec[name]
-            if not c.lower <= v <= c.upper:
-                raise ValueError(f"{cls.NAME}: {bbm_name} parameter {key!r} = {v!r} is outside the model's "
-                                 f"domain [{c.lower:g}, {c.upper:g}]")
-            shape[name] = v
+            shape[name] = p.number(key)
+            p.within(key, shape[name], c.lower, c.upper, f"[{c.lower:g}, {c.upper:g}]")
         cls.validate_shape(bbm_name, shape)
         return {**out, **shape}
 

@@ -64,6 +64,7 @@ from brdfbench import reused
 
 from .analytic import _COMMON_FLOPS, _KD, _KS, AnalyticBRDF, Coefficient
 from .analytic_terms import ALPHA_MIN, HALF_WIDTH_PER_ALPHA, geometry
+from .published_params import PublishedParams
 from .sgd_terms import INV_PI, sgd_constants, sgd_lobe
 
 Tensor = torch.Tensor
@@ -109,33 +110,6 @@ COEFFS_SHAPE = (
 #: BBM's parameter -> our coefficient ("eta" holds two: its rows F0 and F1).
 PUBLISHED_KEYS = {"albedo": "ks", "alpha": "alpha", "p": "p", "eta": ("f0", "f1"), "K": "K_ap",
                   "Lambda": "sh_lambda", "c": "sh_c", "k": "sh_k", "theta0": "sh_theta0"}
-
-
-def _fail(bbm_name: str, what: str) -> ValueError:
-    return ValueError(f"{SGD.NAME}: published {bbm_name} fit: {what}")
-
-
-def _finite(bbm_name: str, key: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise _fail(bbm_name, f"parameter {key!r} must hold numbers, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise _fail(bbm_name, f"parameter {key!r} must be finite, got {value!r}")
-    return v
-
-
-def _rgb(bbm_name: str, key: str, value: Any) -> list[float]:
-    values = list(value) if isinstance(value, (list, tuple)) else [value]
-    if len(values) == 1:
-        values = values * 3
-    if len(values) != 3:
-        raise _fail(bbm_name, f"parameter {key!r} needs 1 or 3 values (RGB), got {len(values)}: {value!r}")
-    return [_finite(bbm_name, key, v) for v in values]
-
-
-def _check(bbm_name: str, key: str, values: list[float], ok, meaning: str, raw: Any) -> None:
-    if not all(ok(v) for v in values):
-        raise _fail(bbm_name, f"parameter {key!r} = {raw!r} is outside the model's domain ({meaning})")
 
 
 # --------------------------------------------------------------------------- the model
@@ -204,42 +178,30 @@ class SGD(AnalyticBRDF):
         """Coefficients of a published `Bagher` fit: albedo → ks, the rows of eta → f0 and f1,
         K → K_ap, Lambda, c, k, theta0 → sh_lambda, sh_c, sh_k, sh_theta0; the Lambertian
         albedo → kd. ValueError names a missing, unknown, misshapen or out-of-domain one."""
-        if bbm_name not in cls.PUBLISHED_AS:
-            raise ValueError(f"{cls.NAME}: cannot evaluate a published {bbm_name!r} fit; it evaluates "
-                             f"{', '.join(cls.PUBLISHED_AS)}")
-        if not isinstance(params, dict):
-            raise _fail(bbm_name, f"parameters must be a dict, got {type(params).__name__}")
-        expected = list(PUBLISHED_KEYS)
-        missing = [k for k in expected if k not in params]
-        if missing:
-            raise _fail(bbm_name, f"missing parameter(s) {', '.join(map(repr, missing))}; expected {', '.join(expected)}")
-        unknown = [k for k in params if k not in PUBLISHED_KEYS]
-        if unknown:
-            raise _fail(bbm_name, f"unknown parameter(s) {', '.join(map(repr, unknown))}; expected {', '.join(expected)}")
-
-        kd = _rgb(bbm_name, "diffuse albedo", diffuse)
-        _check(bbm_name, "diffuse albedo", kd, lambda v: v >= 0, "non-negative", diffuse)
-        out: dict[str, Any] = {"kd": kd}
+        pp = PublishedParams(cls, bbm_name, params)
+        pp.expect(PUBLISHED_KEYS)
+        out: dict[str, Any] = {"kd": pp.diffuse(diffuse)}
         eta = params["eta"]
         if not isinstance(eta, (list, tuple)) or len(eta) != 2:
-            raise _fail(bbm_name, f"parameter 'eta' must be two rows [F0, F1] (each 1 or 3 values), got {eta!r}")
-        out["f0"], out["f1"] = _rgb(bbm_name, "eta[0] (F0)", eta[0]), _rgb(bbm_name, "eta[1] (F1)", eta[1])
+            raise pp.fail(f"parameter 'eta' must be two rows [F0, F1] (each 1 or 3 values), got {eta!r}")
+        out["f0"] = pp.rgb("eta[0] (F0)", eta[0], nonnegative=False)
+        out["f1"] = pp.rgb("eta[1] (F1)", eta[1], nonnegative=False)
         for key in ("albedo", "alpha", "p", "K", "Lambda", "c", "k", "theta0"):
-            out[PUBLISHED_KEYS[key]] = _rgb(bbm_name, key, params[key])
+            out[PUBLISHED_KEYS[key]] = pp.rgb(key, nonnegative=False)
 
-        _check(bbm_name, "albedo", out["ks"], lambda v: v >= 0, "a non-negative specular albedo", params["albedo"])
-        _check(bbm_name, "alpha", out["alpha"], lambda v: v >= ALPHA_MIN, f"alpha >= {ALPHA_MIN:g}", params["alpha"])
-        _check(bbm_name, "p", out["p"], lambda v: v >= 0, "p >= 0", params["p"])
-        _check(bbm_name, "K", out["K_ap"], lambda v: v > 0, "a positive normalisation", params["K"])
-        _check(bbm_name, "Lambda", out["sh_lambda"], lambda v: v >= 0, "Lambda >= 0", params["Lambda"])
-        _check(bbm_name, "c", out["sh_c"], lambda v: v >= 0, "c >= 0", params["c"])
-        _check(bbm_name, "k", out["sh_k"], lambda v: v > 0, "k > 0", params["k"])
+        pp.within("albedo", out["ks"], 0.0, math.inf, "a non-negative specular albedo")
+        pp.within("alpha", out["alpha"], ALPHA_MIN, math.inf, f"alpha >= {ALPHA_MIN:g}")
+        pp.within("p", out["p"], 0.0, math.inf, "p >= 0")
+        pp.within("K", out["K_ap"], 0.0, math.inf, "a positive normalisation", lo_open=True)
+        pp.within("Lambda", out["sh_lambda"], 0.0, math.inf, "Lambda >= 0")
+        pp.within("c", out["sh_c"], 0.0, math.inf, "c >= 0")
+        pp.within("k", out["sh_k"], 0.0, math.inf, "k > 0", lo_open=True)
         # D's peak (K/π²) exp(−α) α^(−p) must be an fp32 number: beyond it the lobe overflows.
         for a, p, kk in zip(out["alpha"], out["p"], out["K_ap"]):
             if math.log(kk * INV_PI * INV_PI) - a - p * math.log(a) > LOG_FP32_MAX:
-                raise _fail(bbm_name, f"parameters 'K' = {params['K']!r}, 'alpha' = {params['alpha']!r}, "
-                                      f"'p' = {params['p']!r} are outside the model's domain (the lobe's peak "
-                                      f"K exp(-alpha) alpha^-p / pi^2 overflows float32)")
+                raise pp.fail(f"parameters 'K' = {params['K']!r}, 'alpha' = {params['alpha']!r}, "
+                              f"'p' = {params['p']!r} are outside the model's domain (the lobe's peak "
+                              f"K exp(-alpha) alpha^-p / pi^2 overflows float32)")
         return out
 
     def drjit_kernel(self):

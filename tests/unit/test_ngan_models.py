@@ -408,7 +408,7 @@ def test_from_published_refuses_bad_parameters(cls):
     shape_key = next(k for k in good if k != "albedo")
     cases = [
         ("NotAModel", good, "NotAModel"),
-        (bbm, {k: v for k, v in good.items() if k != shape_key}, f"'{shape_key}'.*missing"),
+        (bbm, {k: v for k, v in good.items() if k != shape_key}, f"missing parameter.*'{shape_key}'"),
         (bbm, {**good, "anisotropy": 0.5}, "unknown.*'anisotropy'"),
         (bbm, {**good, "albedo": [0.1, 0.2]}, "'albedo'.*3 values"),
         (bbm, {**good, "albedo": [0.1, -0.2, 0.1]}, "'albedo'.*non-negative"),

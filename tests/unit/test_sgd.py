@@ -380,8 +380,8 @@ def test_from_published_refuses_bad_input():
         ({"c": [-1e-3, 1e-3, 1e-3]}, "'c' .* outside"),
         ({"k": [0.0, 12.0, 12.0]}, "'k' .* outside"),
         ({"albedo": [-0.1, 0.2, 0.3]}, "'albedo' .* outside"),
-        ({"theta0": [0.2, float("nan"), 0.2]}, "'theta0' must be finite"),
-        ({"c": [1e-3, "x", 1e-3]}, "'c' must hold numbers"),
+        ({"theta0": [0.2, float("nan"), 0.2]}, "'theta0' must hold finite numbers"),
+        ({"c": [1e-3, "x", 1e-3]}, "'c' must hold finite numbers"),
         ({"alpha": [1e-5, 0.02, 0.03], "p": [9.0, 0.5, 0.6]}, "overflows float32"),
     ]
     for change, what in cases:
