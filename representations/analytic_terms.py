@@ -55,6 +55,7 @@ class Geometry(NamedTuple):
     sin2_h: Tensor  # h_x² + h_y², in [0, 1]
     cos_d: Tensor  # ωi·h = |ωi + ωo| / 2, in [0, 1]
     dot_xy: Tensor  # ωi_x ωo_x + ωi_y ωo_y (the tangential part of ωi·ωo), in [-1, 1]
+    sin2_d: Tensor  # sin²θd = |ωi − ωo|²/4, in [0, 1]: relatively accurate where ωi ≈ ωo
 
 
 def geometry(wi: Tensor, wo: Tensor) -> Geometry:
@@ -72,6 +73,7 @@ def geometry(wi: Tensor, wo: Tensor) -> Geometry:
         sin2_h=sin2_h,
         cos_d=cos_d,
         dot_xy=(wi[:, 0] * wo[:, 0] + wi[:, 1] * wo[:, 1]).clamp(-1.0, 1.0),
+        sin2_d=(0.25 * ((wi - wo) ** 2).sum(dim=-1)).clamp(0.0, 1.0),
     )
 
 

@@ -80,6 +80,8 @@ class _Geometry:
         self.sin2_h = dr.clip(h.x * h.x + h.y * h.y, 0.0, 1.0)
         self.cos_d = dr.clip(0.5 * dr.norm(s), 0.0, 1.0)
         self.dot_xy = dr.clip(wi.x * wo.x + wi.y * wo.y, -1.0, 1.0)
+        d = wi - wo
+        self.sin2_d = dr.clip(0.25 * (d.x * d.x + d.y * d.y + d.z * d.z), 0.0, 1.0)
 
 
 def _ggx_ndf(a2, g: _Geometry):

@@ -35,7 +35,7 @@ class LafortuneLobesKernel(AnalyticKernel):
         dc = g.cos_i - g.cos_o
         cc = g.cos_i * g.cos_o
         gap = mirror_gap(g)
-        one_minus_dot = 2.0 * (1.0 - g.cos_d * g.cos_d)
+        one_minus_dot = 2.0 * g.sin2_d
         one_minus_cc = 0.5 * ((dc * dc) + (g.sin2_i + g.sin2_o))
         out = []
         for p in self.lobes:

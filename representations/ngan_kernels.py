@@ -88,7 +88,7 @@ class LafortuneKernel(NganKernel):
         dc = g.cos_i - g.cos_o
         cc = g.cos_i * g.cos_o
         one_minus_cc = 0.5 * ((dc * dc) + (g.sin2_i + g.sin2_o))
-        one_minus_dot = 2.0 * (1.0 - g.cos_d * g.cos_d)
+        one_minus_dot = 2.0 * g.sin2_d
         y = (p["w_forward"] * mirror_gap(g) + p["w_retro"] * one_minus_dot
              + p["w_normal"] * one_minus_cc + p["w_cc"] * cc)
         return cos_power(p["n"], p["norm"], y)

@@ -235,10 +235,11 @@ class Phong(NganBRDF):
 
 def lafortune_terms(g: Geometry) -> dict[str, Tensor]:
     """The per-pair parts of a generalised cosine lobe, shared by all its lobes: 1 − cos α
-    (`mirror_gap`), 1 − ωi·ωo, 1 − cosθi cosθo (from non-negative parts) and cosθi cosθo."""
+    (`mirror_gap`), 1 − ωi·ωo = 2 sin²θd, 1 − cosθi cosθo (from non-negative parts) and
+    cosθi cosθo."""
     dc = g.cos_i - g.cos_o
     cc = g.cos_i * g.cos_o
-    return {"gap": mirror_gap(g), "one_minus_dot": 2.0 * (1.0 - g.cos_d * g.cos_d),
+    return {"gap": mirror_gap(g), "one_minus_dot": 2.0 * g.sin2_d,
             "one_minus_cc": 0.5 * ((dc * dc) + (g.sin2_i + g.sin2_o)), "cc": cc}
 
 
@@ -268,9 +269,9 @@ class Lafortune(NganBRDF):
 
     every term non-negative, 1 − cos α from `mirror_gap` and 1 − cosθi cosθo =
     ((cosθi − cosθo)² + sin²θi + sin²θo)/2: no overflow of m^n or of the unnormalised
-    power (0.577^4060 underflows even in fp64), and fp32-accurate forward lobes. The
-    retro-reflective part (a > 0) uses 1 − ωi·ωo = 2(1 − cos²θd), which is not relatively
-    accurate in fp32 next to ωi = ωo (no published fit has C_xy > 0).
+    power (0.577^4060 underflows even in fp64), and fp32-accurate lobes, forward and
+    retro-reflective alike (1 − ωi·ωo = 2 sin²θd with sin²θd = |ωi − ωo|²/4, which keeps
+    its relative accuracy next to ωi = ωo).
 
     The max makes the lobe very sensitive to |C_xy| ≠ |C_z|: the published pair rounded
     to three digits, C_xy = −0.578, C_z = 0.577 (n = 3980), is Phong times

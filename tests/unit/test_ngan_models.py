@@ -259,9 +259,8 @@ def test_extremes_stay_finite_and_fp32_agrees_with_fp64(name, coeffs):
                 assert bool((out == 0).all())
                 continue
             assert bool((out >= floor).all()), f"lost the diffuse term ({family}, {dtype})"
-            # the same fp32 inputs in fp64; not for a retro-reflective Lafortune lobe (C_xy > 0), whose
-            # 1 − ωi·ωo = 2(1 − cos²θd) is not relatively accurate in fp32 (documented in the class)
-            if dtype == torch.float32 and coeffs.get("cxy", -1.0) <= 0:
+            # the same fp32 inputs in fp64 (retro-reflective Lafortune lobes, C_xy > 0, included)
+            if dtype == torch.float32:
                 want = m.eval(wi.double(), wo.double())
                 rel = float(((out.double() - want).abs() / want).max())
                 assert rel < 1e-3, f"fp32 differs from fp64 by {rel:.3g} relative ({family})"
@@ -300,6 +299,27 @@ def test_narrow_lobes_are_accurate_in_fp32(name, coeffs, width):
             return cos_a ** coeffs["exponent"]
         na, nb = naive(wi, wo).double(), naive(wi.double(), wo.double())
         assert float(((na - nb).abs() / nb)[keep].max()) > 1e-2
+
+
+def test_a_narrow_retro_reflective_lafortune_lobe_is_accurate_in_fp32():
+    """C_xy = C_z > 0 peaks at ωo = ωi; its 1 − ωi·ωo = 2 sin²θd keeps fp32 within ~1e-5 of
+    fp64 on the same inputs, where 2(1 − cos²θd) would not (checked below, so the tolerance
+    means something)."""
+    g = torch.Generator().manual_seed(11)
+    u = lambda: torch.rand(100_000, generator=g, dtype=F64)  # noqa: E731
+    wi, wo = from_half_diff(math.radians(80) * u(), 2 * math.pi * u(), 3e-3 * u(), 2 * math.pi * u())
+    wi, wo = wi.float(), wo.float()
+    keep = (wi[:, 2] > 0.05) & (wo[:, 2] > 0.05)
+    wi, wo = wi[keep], wo[keep]
+    m = model("lafortune", kd=0.0, ks=1.0, cxy=0.6, cz=0.6, exponent=1e5)
+    a, b = m.eval(wi, wo).double(), m.eval(wi.double(), wo.double())
+    alive = b[:, 0] > 1e-30 * float(b.max())
+    assert float(alive.float().mean()) > 0.2
+    assert float(((a - b).abs() / b)[alive].max()) < 1e-4
+    cos_d = 0.5 * torch.linalg.vector_norm(wi + wo, dim=-1)
+    naive = 2.0 * (1.0 - cos_d * cos_d)
+    exact = 0.5 * ((wi.double() - wo.double()) ** 2).sum(-1)
+    assert float(((naive.double() - exact).abs() / exact)[alive].max()) > 1e-2
 
 
 # --------------------------------------------------------------------------- published fits
