@@ -2,7 +2,7 @@
 
 Work on tensors of ~10⁵–10⁶ values (an analytic fit's objective, the χ² engine, small MLPs,
 image-distance loops, Inception batches) gains little from a second thread and, on a
-machine whose cores are busy, loses up to 10× to thread hand-offs; one thread also fixes
+machine whose cores are busy, loses much more to thread hand-offs; one thread also fixes
 the order of every reduction, whatever the machine's core count.
 """
 

@@ -202,13 +202,6 @@ def accuracy_metrics(summary: pd.DataFrame) -> list[str]:
     return sorted(present, key=lambda m: (ranks[m] is None, ranks[m] or 0, m))
 
 
-def primary_metric(summary: pd.DataFrame) -> str | None:
-    """The present metric of lowest rank, else the first other non-cost metric by name (a plugin's own)."""
-    rows = summary[summary["spp"] == 0] if "spp" in summary else summary
-    ordered = accuracy_metrics(rows)
-    return ordered[0] if ordered else None
-
-
 def ranking(summary: pd.DataFrame, metric: str) -> pd.DataFrame:
     rows = summary[(summary.metric == metric) & (summary.spp == 0)]
     if rows.empty:

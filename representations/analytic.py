@@ -196,10 +196,10 @@ class CookTorrance(AnalyticBRDF):
     D = GGX / Trowbridge-Reitz with α = roughness²;
     F = Schlick with F0 = ((IoR − 1)/(IoR + 1))²;
     G = G1(ωi) G1(ωo), separable Schlick-GGX G1(v) = n·v / ((n·v)(1 − k) + k) with
-    k = α²/2 exactly as the seed writes it (its "k_IBL"; note this is roughness⁴/2, much
+    k = α²/2 exactly as Hu 2026 writes it (its "k_IBL"; note this is roughness⁴/2, much
     smaller than the usual UE4 k = α/2, so G is close to 1 except at grazing).
 
-    The seed's diffuse term (n·v)/π is a known slip: Lambert is k_d/π (DESIGN.md).
+    Hu 2026 writes the diffuse term as (n·v)/π, a slip: Lambert's is k_d/π, used here.
     Coefficients: kd (RGB), ks (RGB), roughness, ior.
     """
 

@@ -783,7 +783,3 @@ class _DeviceEpochs:
             self.step += 1
         losses = self.acc[0] / self.acc[1].clamp(min=1)
         return losses.cpu()
-
-
-def with_overrides(recipe: Recipe, **changes) -> Recipe:
-    return replace(recipe, **{k: v for k, v in changes.items() if v is not None})

@@ -37,9 +37,9 @@ normalisation) and measures how far each continuous cell coordinate lies from a 
 a lane within `MERL_EDGE_TOL` cells of one (about 10x the fp32 path's worst error, measured
 over 10⁷ adversarial and random pairs) or in an ill-conditioned configuration takes a
 symbolic branch that recomputes the cells in fp64 with the reader's own operations, as
-brdfbench.merl does (`merl_indices`). The branch runs for ~0.3 % of a renderer's lanes and
-costs about 5 % of a render; with the packet gather below, the sphere benchmark renders
-1.5x faster than with fp64 cells everywhere. drjit's fp64 sin, cos, acos and atan2 are its
+brdfbench.merl does (`merl_indices`). The branch runs for a small share of a renderer's
+lanes, so most of a render keeps the fp32 path.
+drjit's fp64 sin, cos, acos and atan2 are its
 own, not the C library's that brdfbench.merl and the reader call: their last bits differ
 for a fifth to two fifths of arguments, which moves a pair only within ~1e-13 cells of a
 cell edge or where the reader's own angle is rounding noise (φd at ωi = ωo). Pairs that

@@ -3,12 +3,12 @@
 Hemisphere samplers draw ωo about the normal, independently of ωi: `uniform`, `cosine`,
 `power_cosine`. Microfacet samplers draw the half vector h about the normal with density
 D(h) cosθh and reflect ωi about it: `blinn_phong`, `beckmann`, `ggx`; `ggx_vndf` draws h
-from the distribution of normals visible from ωi (Heitz 2018). The seed's microfacet pdfs
+from the distribution of normals visible from ωi (Heitz 2018). Hu 2026's microfacet pdfs
 are corrected:
 
 - the density of ωo is D(h) cosθh / (4 |ωo·h|), the Jacobian of the reflection
-  (the seed gives D(h) cosθh);
-- the Beckmann NDF is exp(−tan²θh/α²) / (π α² cos⁴θh): the seed drops the 1/π, so its
+  (Hu 2026 gives D(h) cosθh);
+- the Beckmann NDF is exp(−tan²θh/α²) / (π α² cos⁴θh): Hu 2026 drops the 1/π, so its
   "CDF" π(1 − exp(−tan²θh/α²)) runs to π, and its sample() inverts that, as
   tan²θh = −α² ln(1 − ξ/π); here tan²θh = −α² ln(1 − ξ).
 

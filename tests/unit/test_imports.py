@@ -2,7 +2,7 @@
 
 Read statically with `ast` from every .py file, imports inside functions included (a lazy
 import still couples two modules), and those under `if TYPE_CHECKING:` too. A plugin is
-found through the registry's entry points; the core must never name one (DESIGN.md). A
+found through the registry's entry points; the core must never name one. A
 cycle, even through a lazy import, means two modules share something that belongs in a
 third module both import.
 """
