@@ -138,9 +138,8 @@ def evaluate(model: Representation, material: Material, *, metrics: list[str] | 
     import torch
 
     from .harness.accuracy import evaluate_accuracy
-    from .harness.cost import evaluation_throughput, model_size
+    from .harness.cost import evaluation_throughput, fit_loss, model_size
     from .pipeline.config import harness_class
-    from .protocol import FIT_LOSS_KEY
 
     config = _harness_config("accuracy", metrics=metrics, n_random=n_random, dtype=dtype)
     _check_seed(seed)
@@ -151,9 +150,7 @@ def evaluate(model: Representation, material: Material, *, metrics: list[str] | 
     if cost:
         out.append(evaluation_throughput(model, batch=config.throughput_batch, seed=seed, dtype=torch_dtype))
         out += model_size(model)
-        fit_loss = model.metadata().get(FIT_LOSS_KEY)
-        if isinstance(fit_loss, (int, float)) and not isinstance(fit_loss, bool):
-            out.append(Measurement("fit_loss", float(fit_loss), "objective", False))
+        out += fit_loss(model)
     return Scores(tuple(out))
 
 

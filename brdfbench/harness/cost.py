@@ -15,7 +15,7 @@ import time
 import torch
 
 from ..device import synchronize
-from ..protocol import Representation
+from ..protocol import FIT_LOSS_KEY, Representation
 from . import Measurement, directions
 
 
@@ -45,3 +45,12 @@ def model_size(model: Representation) -> list[Measurement]:
     if flops is not None:
         out.append(Measurement("flops_per_eval", float(flops), "FLOP", False))
     return out
+
+
+def fit_loss(model: Representation) -> list[Measurement]:
+    """The model's own final fit objective (its metadata's `fit_loss`), where it reports a
+    real number (a bool is not one)."""
+    value = model.metadata().get(FIT_LOSS_KEY)
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return [Measurement("fit_loss", float(value), "objective", False)]
+    return []

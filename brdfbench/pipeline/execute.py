@@ -27,8 +27,7 @@ from .. import device as devices
 from .. import artifacts, modelio
 from ..errors import BrdfbenchError, ConfigError, DataError, RenderError, os_error
 from ..harness import HarnessContext, Measurement
-from ..harness.cost import model_size
-from ..protocol import FIT_LOSS_KEY
+from ..harness.cost import fit_loss, model_size
 from . import calibration, fit_pool
 from .config import RunConfig
 from .memory import peak_rss, reset_peak
@@ -204,9 +203,7 @@ def _measure(job: RunConfig, material, model, state: JobState, fit_s: float, fit
         measurements += _memory("peak_rss_eval")
         measurements.append(Measurement("fit_time", fit_s, "s", False))
         measurements += fit_extra
-        fit_loss = model.metadata().get(FIT_LOSS_KEY)
-        if isinstance(fit_loss, (int, float)):
-            measurements.append(Measurement("fit_loss", float(fit_loss), "objective", False))
+        measurements += fit_loss(model)
         measurements += extra
         measurements += model_size(model)
         _check_finite(measurements, material.name)
