@@ -45,6 +45,11 @@ class Sampler(ABC):
     """
 
     tags: ClassVar[frozenset[str]] = frozenset()
+    #: "module:Class" of a built-in sampler's drjit twin (render/drjit_samplers.py or
+    #: drjit_lobe_samplers.py), for the class that declares it only (a subclass may change
+    #: `sample` or `pdf`); None: it renders in torch. A third-party sampler overrides
+    #: `drjit_sampler` instead.
+    DRJIT_TWIN: ClassVar[str | None] = None
 
     def __init__(self, **params: Any):
         self.params = dict(params)
@@ -83,6 +88,21 @@ class Sampler(ABC):
         if mask.any():
             out[mask] = self._pdf(wi[mask], wo[mask]).to(wi.dtype)
         return out
+
+    def drjit_sampler(self):
+        """The drjit twin named by DRJIT_TWIN where this exact class declares it, else None
+        (render/drjit_samplers.py reads this hook; drjit is imported only here)."""
+        twin = type(self).__dict__.get("DRJIT_TWIN")
+        if twin is None:
+            return None
+        from ..render import drjit_lobe_samplers, drjit_samplers  # static, so the import rules see them
+
+        module, name = twin.split(":")
+        modules = {"drjit_samplers": drjit_samplers, "drjit_lobe_samplers": drjit_lobe_samplers}
+        if module not in modules:
+            raise ValueError(f"{type(self).__name__}.DRJIT_TWIN={twin!r}: not a module of brdfbench.render's twins "
+                             f"({', '.join(modules)})")
+        return getattr(modules[module], name)(self)
 
     @abstractmethod
     def _sample(self, wi: Tensor, u: Tensor) -> Tensor:

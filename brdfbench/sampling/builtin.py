@@ -107,12 +107,7 @@ class Uniform(_Hemisphere):
     def _pdf(self, wi, wo):
         return torch.full((wo.shape[0],), INV_2PI, dtype=wo.dtype)
 
-    def drjit_sampler(self):
-        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
-        may change `sample` or `pdf`."""
-        from ..render.drjit_samplers import UniformTwin
-
-        return UniformTwin(self) if type(self) is Uniform else None
+    DRJIT_TWIN = "drjit_samplers:UniformTwin"
 
 
 class Cosine(_Hemisphere):
@@ -134,12 +129,7 @@ class Cosine(_Hemisphere):
     def _pdf(self, wi, wo):
         return wo[:, 2] * INV_PI
 
-    def drjit_sampler(self):
-        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
-        may change `sample` or `pdf`."""
-        from ..render.drjit_samplers import CosineTwin
-
-        return CosineTwin(self) if type(self) is Cosine else None
+    DRJIT_TWIN = "drjit_samplers:CosineTwin"
 
 
 class PowerCosine(_Hemisphere):
@@ -171,12 +161,7 @@ class PowerCosine(_Hemisphere):
         n = self._n
         return _finite_max((n + 1.0) * INV_2PI * torch.exp(n * log_cos_theta(wo)))
 
-    def drjit_sampler(self):
-        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
-        may change `sample` or `pdf`."""
-        from ..render.drjit_samplers import PowerCosineTwin
-
-        return PowerCosineTwin(self) if type(self) is PowerCosine else None
+    DRJIT_TWIN = "drjit_samplers:PowerCosineTwin"
 
 
 # --------------------------------------------------------------------------- microfacet
@@ -250,12 +235,7 @@ class BlinnPhong(_Microfacet):
         n = self._n
         return (n + 2.0) * INV_2PI * torch.exp((n + 1.0) * log_cos_theta(h))
 
-    def drjit_sampler(self):
-        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
-        may change `sample` or `pdf`."""
-        from ..render.drjit_samplers import BlinnPhongTwin
-
-        return BlinnPhongTwin(self) if type(self) is BlinnPhong else None
+    DRJIT_TWIN = "drjit_samplers:BlinnPhongTwin"
 
 
 class Beckmann(_Microfacet):
@@ -292,12 +272,7 @@ class Beckmann(_Microfacet):
         value = torch.exp(log_value) * (INV_PI / self._a2)
         return torch.where(ok, value, torch.zeros_like(value))
 
-    def drjit_sampler(self):
-        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
-        may change `sample` or `pdf`."""
-        from ..render.drjit_samplers import BeckmannTwin
-
-        return BeckmannTwin(self) if type(self) is Beckmann else None
+    DRJIT_TWIN = "drjit_samplers:BeckmannTwin"
 
 
 class GGX(_Microfacet):
@@ -329,12 +304,7 @@ class GGX(_Microfacet):
     def _d_cos(self, h):
         return _ggx_d(self._a2, h) * h[:, 2]
 
-    def drjit_sampler(self):
-        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
-        may change `sample` or `pdf`."""
-        from ..render.drjit_samplers import GGXTwin
-
-        return GGXTwin(self) if type(self) is GGX else None
+    DRJIT_TWIN = "drjit_samplers:GGXTwin"
 
 
 def _ggx_d(a2: float, h: Tensor) -> Tensor:
@@ -419,9 +389,4 @@ class GGXVisible(Sampler):
         lam = cos_i + torch.sqrt(cos_i * cos_i + a2 * sin2_theta(wi))
         return _finite_max(_ggx_d(a2, h) / (2.0 * lam))
 
-    def drjit_sampler(self):
-        """The drjit twin (render/drjit_samplers.py), for this exact class only: a subclass
-        may change `sample` or `pdf`."""
-        from ..render.drjit_samplers import GGXVisibleTwin
-
-        return GGXVisibleTwin(self) if type(self) is GGXVisible else None
+    DRJIT_TWIN = "drjit_samplers:GGXVisibleTwin"

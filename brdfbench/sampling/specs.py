@@ -47,3 +47,29 @@ GGX_VNDF = SamplerSpec(
     target="brdfbench.sampling.builtin:GGXVisible",
     tags=_MICROFACET,
 )
+WARD = SamplerSpec(
+    name="ward",
+    description="Anisotropic Ward half-vector sampling (Ward 1992) with Walter's (2005) pdf "
+    "exp(-tan^2(theta_h)(cos^2/ax^2 + sin^2/ay^2)) / (pi ax ay cos^3(theta_h)), reflected (pdf / 4|wo.h|)",
+    target="brdfbench.sampling.lobes:Ward",
+    tags=_MICROFACET,
+)
+ASHIKHMIN_SHIRLEY = SamplerSpec(
+    name="ashikhmin_shirley",
+    description="Ashikhmin-Shirley (2000) anisotropic half-vector sampling, "
+    "p(h) = sqrt((nu+1)(nv+1))/(2 pi) cos^(nu cos^2 + nv sin^2)(theta_h), reflected (pdf / 4|wo.h|)",
+    target="brdfbench.sampling.lobes:AshikhminShirley",
+    tags=_MICROFACET,
+)
+PHONG = SamplerSpec(
+    name="phong",
+    description="Modified Phong lobe sampling (Lafortune & Willems 1994) about the mirror direction of wi, "
+    "pdf (n+1) cos^n(alpha)/(2 pi); samples below the horizon have density 0",
+    target="brdfbench.sampling.lobes:Phong",
+)
+LAFORTUNE = SamplerSpec(
+    name="lafortune",
+    description="One generalised cosine lobe (Lafortune et al. 1997) about normalise(cxy wi_x, cxy wi_y, cz wi_z), "
+    "pdf (n+1) max(0, cos alpha)^n/(2 pi); samples below the horizon have density 0",
+    target="brdfbench.sampling.lobes:Lafortune",
+)

@@ -41,6 +41,8 @@ CHEAP = {
 SAMPLERS = {
     "uniform": {}, "cosine": {}, "power_cosine": {"exponent": 20.0}, "blinn_phong": {"exponent": 50.0},
     "beckmann": {"alpha": 0.3}, "ggx": {"alpha": 0.3}, "ggx_vndf": {"alpha": 0.3},
+    "ward": {"alpha_x": 0.2, "alpha_y": 0.45}, "ashikhmin_shirley": {"nu": 30.0, "nv": 300.0},
+    "phong": {"exponent": 20.0}, "lafortune": {"cxy": -0.8, "cz": 0.6, "exponent": 20.0},
 }
 
 

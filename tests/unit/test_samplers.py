@@ -24,6 +24,8 @@ from brdfbench.testing.samplers import chi2_cells, check_sampler, sampler_checks
 
 NAMES = registry.names("samplers")
 BUILTINS = {"uniform", "cosine", "power_cosine", "blinn_phong", "beckmann", "ggx", "ggx_vndf"}
+#: The analytic models' samplers (sampling/lobes.py; their own tests: test_lobe_samplers.py).
+LOBES = {"ward", "ashikhmin_shirley", "phong", "lafortune"}
 DTYPES = (torch.float64, torch.float32)
 
 # The Šidák family: every χ² test this file can run, quick (default) and full (slow)
@@ -52,8 +54,8 @@ def test_conformance(check):
 
 
 def test_builtin_samplers_are_registered_as_sampler_specs():
-    assert BUILTINS <= set(NAMES)
-    for name in BUILTINS:
+    assert BUILTINS | LOBES <= set(NAMES)
+    for name in BUILTINS | LOBES:
         spec = registry.get("samplers", name)
         assert isinstance(spec, SamplerSpec)
         cls = spec.load()
@@ -88,7 +90,7 @@ def test_roughness_maps_to_beckmann_equivalent_exponent():
 
 # --------------------------------------------------------------------------- properties
 
-_names = st.sampled_from(sorted(BUILTINS))
+_names = st.sampled_from(sorted(BUILTINS | LOBES))
 _alphas = st.floats(-3.0, 0.0).map(lambda e: 10.0**e)
 _thetas = st.one_of(st.floats(0.0, 89.9), st.sampled_from([0.0, 80.0, 89.9]))
 
