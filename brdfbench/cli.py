@@ -7,7 +7,7 @@ leaderboard). Subcommands that need no config:
     brdfbench list                      one line per registered plugin
     brdfbench report [--results DIR]    regenerate the leaderboard from the results store
     brdfbench merge SRC... --into DIR   copy the cells of other results folders into DIR's store
-    brdfbench check NAME                run the conformance kit on a representation or generator
+    brdfbench check NAME                run the conformance kit on a representation, generator or sampler
     brdfbench inspect MODEL.safetensors describe a saved model or generator (loads no code)
     brdfbench convert SRC DEST          convert neural-BRDF weights between formats
                                         (.h5, .npy 675-vector, .pt state_dict, .safetensors)
@@ -98,14 +98,21 @@ def cmd_check(args) -> int:
 
     if args.timeout <= 0:
         return _fail(f"--timeout must be a positive number of seconds, not {args.timeout:g}")
-    generator = args.name in registry.names("generators") and args.name not in registry.names("representations")
-    registry.get("generators" if generator else "representations", args.name)  # an unknown name: one line, exit 2
+    groups = {"representation": "representations", "generator": "generators", "sampler": "samplers"}
+    kind = args.kind
+    if kind is None:  # the first kind that has the name (a sampler may share a model's name: --kind)
+        kind = next((k for k, group in groups.items() if args.name in registry.names(group)), "representation")
+        also = [k for k, group in groups.items() if k != kind and args.name in registry.names(group)]
+        if also:
+            print(f"brdfbench check: {args.name!r} is also a {' and a '.join(also)}: checking the {kind} "
+                  f"(--kind {also[0]} for the other)", file=sys.stderr)
+    registry.get(groups[kind], args.name)  # an unknown name: one line, exit 2
 
     def progress(check: str, outcome: str, seconds: float) -> None:
         print(f"brdfbench check: {outcome:8s} {check} ({seconds:.1f} s)", file=sys.stderr, flush=True)
 
-    report = check_isolated("generator" if generator else "representation", args.name, n_pairs=args.pairs,
-                            full=args.full, timeout_s=args.timeout, on_result=progress)
+    report = check_isolated(kind, args.name, n_pairs=args.pairs, full=args.full, timeout_s=args.timeout,
+                            on_result=progress)
     print(report.summary())
     return 0 if report.passed else 1
 
@@ -158,11 +165,14 @@ def _subcommand_parser() -> argparse.ArgumentParser:
     p.add_argument("--into", required=True, metavar="DIR", help="results folder to merge into (created if new)")
     p.add_argument("--store", default="sqlite", help="results store plugin of all of them (default: sqlite)")
     p.set_defaults(func=cmd_merge)
-    p = sub.add_parser("check", help="run the conformance kit on a registered representation or generator")
+    p = sub.add_parser("check", help="run the conformance kit on a registered representation, generator or sampler")
     p.add_argument("name")
+    p.add_argument("--kind", choices=("representation", "generator", "sampler"), default=None,
+                   help="the plugin kind (default: the first of these that has the name)")
     p.add_argument("--pairs", type=int, default=10**6, help="adversarial direction pairs per dtype (default 1e6)")
     p.add_argument("--full", action="store_true",
-                   help="fit with the representation's default parameters, not its quick check_params")
+                   help="a representation or generator with its default parameters, not its quick check_params; "
+                        "a sampler over the full chi-square sweep, not the quick one")
     p.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",
                    help="time limit of each check, run in a worker process (default 600)")
     p.set_defaults(func=cmd_check)

@@ -16,8 +16,9 @@ a spec's `xfail_checks` maps a check name to the reason it is expected to fail, 
 `check_params` are the constructor arguments of the default, quick run (a short fit, say);
 `full=True` (`brdfbench check NAME --full`) checks the representation's defaults.
 
-Generators have a kit of their own: `check_generator("pca_brdf")` / `generator_checks`
-(see `brdfbench.testing.generators`).
+Generators and samplers have kits of their own: `check_generator("pca_brdf")` /
+`generator_checks` (`brdfbench.testing.generators`) and `check_sampler("ggx")` /
+`sampler_checks` (`brdfbench.testing.samplers`, with Mitsuba's χ² test).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from .adversarial import FAMILIES, adversarial_pairs
 from .generators import check_generator, generator_checks
 from .kit import Check, ConformanceReport, check_representation, representation_checks
 from .metrics import check_metric
+from .samplers import check_sampler, sampler_checks
 
 __all__ = [
     "FAMILIES",
@@ -36,5 +38,7 @@ __all__ = [
     "check_metric",
     "generator_checks",
     "check_representation",
+    "check_sampler",
     "representation_checks",
+    "sampler_checks",
 ]

@@ -2,8 +2,8 @@
 
 `brdfbench check` certifies code it does not trust: a plugin that segfaults, ends the
 process (`os._exit`) or hangs must fail the check it is in, not take the command down.
-The check names are enumerated by the first worker from the kit (`representation_checks`
-/ `generator_checks`: the plugin is never imported by the command itself); the checks run
+The check names are enumerated by the first worker from the kit (`representation_checks`,
+`generator_checks`, `sampler_checks`: the plugin is never imported by the command itself); the checks run
 in order in one spawned worker, which keeps the kit's
 context (the fitted model) from one check to the next. When the worker dies or a check
 overruns `timeout_s` (the worker is then killed with SIGKILL, which a plugin cannot
@@ -32,7 +32,7 @@ from .kit import DEFAULT_PAIRS, Check, ConformanceReport
 
 #: Seconds a check may run by default (`brdfbench check --timeout`).
 DEFAULT_TIMEOUT_S = 600.0
-KINDS = ("representation", "generator")
+KINDS = ("representation", "generator", "sampler")
 
 
 def _checks(kind: str, name: str, n_pairs: int, full: bool) -> tuple[list[Check], dict]:
@@ -42,6 +42,10 @@ def _checks(kind: str, name: str, n_pairs: int, full: bool) -> tuple[list[Check]
 
         spec = _resolve(name)
         return generator_checks(spec, full=full), kit_params(spec, full=full)
+    if kind == "sampler":
+        from .samplers import _resolve as _sampler, sampler_checks
+
+        return sampler_checks(_sampler(name), sweep="full" if full else "quick", n_pairs=n_pairs), {}
     from .kit import _resolve, check_params, representation_checks
 
     spec = _resolve(name)
@@ -51,7 +55,7 @@ def _checks(kind: str, name: str, n_pairs: int, full: bool) -> tuple[list[Check]
 def check_isolated(kind: str, name: str, *, n_pairs: int = DEFAULT_PAIRS, full: bool = False,
                    timeout_s: float = DEFAULT_TIMEOUT_S,
                    on_result: Callable[[str, str, float], None] | None = None) -> ConformanceReport:
-    """Run the kit on representation or generator `name`, each check in a worker process
+    """Run the kit on representation, generator or sampler `name`, each check in a worker process
     limited to `timeout_s`; a check the worker died or overran in is "failed" (or
     "xfailed", if declared) with the cause. `on_result(check, outcome, seconds)` is called
     as each check ends. The plugin is imported in the workers only: one that crashes on
@@ -194,6 +198,16 @@ class _CheckWorker:
 # --------------------------------------------------------------------------- inside the worker
 
 
+def _skips(kind: str) -> tuple[type[BaseException], ...]:
+    """Exceptions a kind's checks raise to be reported skipped: a sampler's χ² cell that the
+    dtype cannot resolve (`check_sampler` skips it too)."""
+    if kind != "sampler":
+        return ()
+    from ..sampling.chi2 import Unresolvable
+
+    return (Unresolvable,)
+
+
 def _worker_main(conn) -> None:
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the parent, which kills us
@@ -217,7 +231,7 @@ def _worker_main(conn) -> None:
             return
         report = ConformanceReport(name)
         if check in checks:
-            report.run(checks[check])
+            report.run(checks[check], skip=_skips(kind))
         else:
             report.outcomes[check] = "failed"
             report.details[check] = "the worker process found no such check"

@@ -200,3 +200,46 @@ def test_in_process_registrations_reach_the_worker(site, monkeypatch):
     assert "expected: known: ends the process; worker died: exited with status 3" in report.details["fit_deterministic"]
     assert report.passed and report.outcomes["save_load_roundtrip"] == "passed", report.summary()
     assert seen == list(report.outcomes.items())
+
+
+# --------------------------------------------------------------------------- samplers
+
+BROKEN_SAMPLER = '''
+"""A third-party-style sampler whose pdf is twice its sampling density."""
+from brdfbench.sampling.builtin import GGX
+
+
+class DoubledPdf(GGX):
+    def _pdf(self, wi, wo):
+        return 2.0 * super()._pdf(wi, wo)
+'''
+
+
+def test_a_sampler_is_checked_in_isolation_with_its_chi2_cells(tmp_path):
+    """`--kind sampler`: the sampler kit's fixed checks and its quick χ² sweep, each check in
+    the worker; `phong` is a representation and a sampler, and the flag picks the sampler."""
+    out, _ = _check("phong", tmp_path, tmp_path, "--kind", "sampler", "--timeout", "120")
+    assert out.returncode == 0, out.stdout + out.stderr
+    outcomes = _lines(out.stdout)
+    chi2 = [c for c in outcomes if c.startswith("chi2[")]
+    assert len(chi2) >= 10 and {"protocol", "shapes_and_dtypes", "pdf_zero_below_horizon"} <= set(outcomes), out.stdout
+    assert set(outcomes.values()) <= {"passed", "skipped"} and "is also a" not in out.stderr
+
+
+def test_a_broken_sampler_fails_its_chi2_cells_in_the_worker(tmp_path, monkeypatch):
+    from brdfbench import registry
+    from brdfbench.specs import SamplerSpec
+    from brdfbench.testing.isolated import check_isolated
+
+    (tmp_path / "broken_sampler.py").write_text(BROKEN_SAMPLER)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    spec = SamplerSpec(name="doubled_pdf", description="test sampler", target="broken_sampler:DoubledPdf",
+                       tags=frozenset({"microfacet"}))
+    registry.register("samplers", spec)
+    try:
+        report = check_isolated("sampler", "doubled_pdf", n_pairs=20_000, timeout_s=120)
+    finally:
+        registry.unregister("samplers", spec.name)
+    chi2 = {k: v for k, v in report.outcomes.items() if k.startswith("chi2[")}
+    assert chi2 and "failed" in chi2.values(), report.summary()
+    assert not report.passed
