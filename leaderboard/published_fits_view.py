@@ -207,7 +207,8 @@ def _section(key: tuple[str, str, str, str], group: pd.DataFrame, raw: dict[str,
     sources = []
     for conf in configs[configs.plugin == PLUGIN].itertuples():
         source = str(_inner(conf.params).get("source", "bagher_sgd"))
-        model, why = model_of(source)
+        chosen = _inner(conf.params).get("model")  # another reading of the source's fits
+        model, why = (str(chosen), "") if chosen else model_of(source)
         mine = configs[configs.plugin == model] if model else configs.iloc[0:0]
         losses = {h: str(_inner(p).get("loss") or DEFAULT_LOSS) for h, p in zip(mine.config_hash, mine.params)}
         labels = _labels(mine, raw, losses)

@@ -79,6 +79,14 @@ class PhongKernel(NganKernel):
         return cos_power(self.shape["n"], self.shape["norm"], mirror_gap(g))
 
 
+class BlinnPhongNganKernel(NganKernel):
+    name = "blinn_phong_ngan"
+    model_name = "blinn_phong_ngan"
+
+    def lobe(self, g):
+        return self.shape["norm"] * cos_power_h(self.shape["n"], g)
+
+
 class LafortuneKernel(NganKernel):
     name = "lafortune"
     model_name = "lafortune"
@@ -116,5 +124,5 @@ class AshikhminShirleyIorKernel(AshikhminShirleyKernel):
 
 
 #: The kernel of each model class (exactly that class: a subclass may change its lobe).
-KERNELS = {k.model_name: k for k in (WardKernel, WardDuerKernel, PhongKernel, LafortuneKernel,
+KERNELS = {k.model_name: k for k in (WardKernel, WardDuerKernel, PhongKernel, BlinnPhongNganKernel, LafortuneKernel,
                                     AshikhminShirleyKernel, AshikhminShirleyIorKernel)}

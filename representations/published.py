@@ -4,7 +4,8 @@ No fitting: `fit(target)` looks the target's name (or `material`) up in a publis
 (`source`: a file shipped in `published_fits/`, e.g. `ngan_ward`, `low_cooktorrance_e2`,
 `bagher_sgd`, or a path to a `.fit` file in the same format) and evaluates that fit with the
 analytic model whose paper it comes from (the class listing the file's model name in its
-`PUBLISHED_AS`). It shows what the published parameters score on our metrics.
+`PUBLISHED_AS`; `model` picks another reading where the convention is disputed). It shows
+what the published parameters score on our metrics.
 
 The published fits were made against the measured MERL data; a dataset of other tables with
 MERL names (`nbrdf_release`'s networks approximating MERL) is a close stand-in, not the
@@ -34,11 +35,10 @@ FORM_MODULES = (
     "brdfbench_representations.ngan_models",
     "brdfbench_representations.microfacet_models",
     "brdfbench_representations.sgd",
+    "brdfbench_representations.he_model",
 )
 #: Models of the shipped files without an implementation here, and why.
-NOT_IMPLEMENTED = {
-    "NganHe": "He, Torrance, Sillion and Greenberg's 1991 model is not implemented in brdfbench",
-}
+NOT_IMPLEMENTED: dict[str, str] = {}
 
 
 class NoPublishedFit(ConfigError):
@@ -52,16 +52,28 @@ def shipped_sources() -> dict[str, Path]:
 
 
 @lru_cache(maxsize=None)
-def published_forms() -> dict[str, type[AnalyticBRDF]]:
-    """Published model name (BBM's, as in the files) -> the class that evaluates it."""
-    forms: dict[str, type[AnalyticBRDF]] = {}
+def published_readings() -> dict[str, tuple[type[AnalyticBRDF], ...]]:
+    """Published model name (BBM's, as in the files) -> every class that evaluates it, the
+    default first (module order, then definition order). Several where the convention is
+    disputed: NganBlinnPhong by `phong` (BBM's mirror-lobe reading) and `blinn_phong_ngan`."""
+    forms: dict[str, list[type[AnalyticBRDF]]] = {}
     for module_name in FORM_MODULES:
         module = importlib.import_module(module_name)
         for obj in vars(module).values():
             if isinstance(obj, type) and issubclass(obj, AnalyticBRDF) and obj.__module__ == module_name:
                 for name in getattr(obj, "PUBLISHED_AS", ()):
-                    forms[name] = obj
-    return forms
+                    forms.setdefault(name, []).append(obj)
+    return {name: tuple(classes) for name, classes in forms.items()}
+
+
+def published_forms() -> dict[str, type[AnalyticBRDF]]:
+    """Published model name -> the class that evaluates it by default."""
+    return {name: classes[0] for name, classes in published_readings().items()}
+
+
+def reading_names() -> dict[str, type[AnalyticBRDF]]:
+    """Registered model name -> class, for every class that evaluates some published fits."""
+    return {c.NAME: c for classes in published_readings().values() for c in classes}
 
 
 def resolve_source(source: Any) -> Path:
@@ -95,7 +107,7 @@ def load_source(source: str) -> FitFile:
 
 def source_model(source: str) -> str | None:
     """The registered name of the model a source's fits are evaluated with (e.g. "ward" for
-    `ngan_ward`), or None where no brdfbench model evaluates them (e.g. `ngan_he`)."""
+    `ngan_ward`), or None where no brdfbench model evaluates them (a user's file of another model)."""
     fits = load_source(source)
     names = {f.model for f in fits.fits.values()}
     forms = published_forms()
@@ -109,18 +121,34 @@ class PublishedFit(Representation):
     tags: ClassVar[frozenset[str]] = frozenset({"isotropic", "reciprocal", "fittable", "analytic"})
     devices = frozenset({"cpu", "cuda"})
 
-    def __init__(self, source: str = "bagher_sgd", material: str | None = None):
+    def __init__(self, source: str = "bagher_sgd", material: str | None = None, model: str | None = None):
         if material is not None and (not isinstance(material, str) or not material):
             raise ConfigError(f"published_fit: material must be a MERL material name or null, got {material!r}")
         resolve_source(source)
-        super().__init__(source=source, material=material)
+        if model is not None and model not in reading_names():
+            import difflib
+
+            known = sorted(reading_names())
+            close = difflib.get_close_matches(str(model), known, n=1, cutoff=0.5)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise ConfigError(f"published_fit: model={model!r} evaluates no published fits{hint} (one of {', '.join(known)}, "
+                              "or null: the source's own)")
+        # model=None (the source's own reading) is left out of params: configurations written before the key stay the same
+        super().__init__(source=source, material=material, **({} if model is None else {"model": model}))
         self.source = source
         self.material = material
+        self.reading = model
         self.model: AnalyticBRDF | None = None
         self.fit_info: dict[str, Any] = {}
 
     def preflight(self) -> None:
-        load_source(self.source)
+        fits = load_source(self.source)
+        if self.reading is not None:
+            readable = {c.NAME for f in fits.fits.values() for c in published_readings().get(f.model, ())}
+            if self.reading not in readable:
+                models = sorted({f.model for f in fits.fits.values()})
+                raise ConfigError(f"published_fit: model={self.reading!r} does not evaluate {self.source}'s "
+                                  f"{', '.join(models)} fits (those: {', '.join(sorted(readable)) or 'none here'})")
 
     def fit(self, target: Material, *, seed: int = 0) -> "PublishedFit":
         fits = load_source(self.source)
@@ -135,6 +163,11 @@ class PublishedFit(Representation):
             why = NOT_IMPLEMENTED.get(entry.model, f"no brdfbench model evaluates {entry.model!r} fits")
             raise NoPublishedFit(f"{where}: {name}: {why} (models with published fits here: {', '.join(sorted(forms))})")
         cls = forms[entry.model]
+        if self.reading is not None:
+            chosen = [c for c in published_readings()[entry.model] if c.NAME == self.reading]
+            if not chosen:
+                raise NoPublishedFit(f"{where}: {name}: model={self.reading!r} does not evaluate {entry.model!r} fits")
+            cls = chosen[0]
         try:
             coeffs = cls.from_published(entry.model, list(entry.diffuse), entry.params)
             model = cls().set_coefficients(**coeffs)
@@ -174,7 +207,7 @@ class PublishedFit(Representation):
         if not tensors:
             return out
         name = metadata.get("model")
-        by_name = {c.NAME: c for c in published_forms().values()}
+        by_name = reading_names()
         if name not in by_name:
             raise ModelFileError(f"published_fit model: unknown model {name!r} in the metadata; expected one of {', '.join(sorted(by_name))}")
         out.model = by_name[name].from_state({}, tensors, {})

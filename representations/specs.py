@@ -126,6 +126,13 @@ WARD_DUER = RepresentationSpec(
     tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
     check_params=QUICK_FIT,  # the kit's quick run: a short fit
 )
+BLINN_PHONG_NGAN = RepresentationSpec(
+    name="blinn_phong_ngan",
+    description="Blinn's half-vector lobe kd/pi + ks (n+2)/(2 pi) cos^n theta_h, the normalisation of Ngan et al.'s Blinn-Phong fits; L1-log-cos fit",
+    target="brdfbench_representations.ngan_models:BlinnPhongNgan",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
 LAFORTUNE = RepresentationSpec(
     name="lafortune",
     description="One isotropic Lafortune et al. 1997 lobe with Ngan et al.'s normalisation (n+2)/(2 pi max(Cxy^2, Cz^2)^(n/2)); L1-log-cos fit",
@@ -165,6 +172,13 @@ SGD = RepresentationSpec(
     name="sgd",
     description="Bagher et al. 2012 shifted gamma distribution microfacet (SGD): kd/pi + ks D_SGD(alpha, p; K_ap) G1 G1 F(F0, F1) / (pi cos cos), RGB shape; L1-log-cos fit",
     target="brdfbench_representations.sgd:SGD",
+    tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
+    check_params=QUICK_FIT,  # the kit's quick run: a short fit
+)
+HE = RepresentationSpec(
+    name="he",
+    description="He et al. 1991 directional-diffuse term as Ngan et al. 2005 fitted it: kd/pi + ks F(IoR) G S(sigma0, tau) D / (pi cos cos), D the series over m at the RGB wavelengths (0.645, 0.526, 0.444 um); L1-log-cos fit",
+    target="brdfbench_representations.he_model:He",
     tags=frozenset({"isotropic", "reciprocal", "fittable", "analytic"}),
     check_params=QUICK_FIT,  # the kit's quick run: a short fit
 )

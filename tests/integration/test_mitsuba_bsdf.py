@@ -24,9 +24,9 @@ from brdfbench.testing.kit import reference_material
 pytestmark = pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="llvm_ad_rgb needs libLLVM >= 19")
 
 #: Built-ins that must render through a native drjit kernel.
-LITERATURE = ("phong", "ward", "ward_duer", "lafortune", "lafortune2", "lafortune3", "ashikhmin_shirley",
-              "ashikhmin_shirley_ior",
-              "cook_torrance_beckmann", "cook_torrance_1982", "low_smooth", "low_microfacet", "sgd")
+LITERATURE = ("phong", "blinn_phong_ngan", "ward", "ward_duer", "lafortune", "lafortune2", "lafortune3",
+              "ashikhmin_shirley", "ashikhmin_shirley_ior", "cook_torrance_beckmann", "cook_torrance_1982",
+              "low_smooth", "low_microfacet", "sgd", "he")
 NATIVE = ("merl", "pca", "lambert", "blinn_phong", "cook_torrance", "ggx", "nbrdf", "naive_mlp", "tripleplane",
           "triplane_gated", "published_fit", *LITERATURE)
 #: Cheap fitting parameters: the adapter is under test here, not the fit.

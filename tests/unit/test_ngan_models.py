@@ -23,20 +23,22 @@ from brdfbench.coords import from_half_diff, spherical_to_vector
 from brdfbench.merl import MerlTable
 from brdfbench.protocol import Material
 from brdfbench.testing import FAMILIES, adversarial_pairs, representation_checks
-from brdfbench_representations.ngan_models import (MODELS, AshikhminShirley, AshikhminShirleyIor, Lafortune, Phong,
-                                                   Ward, WardDuer)
+from brdfbench_representations.ngan_models import (MODELS, AshikhminShirley, AshikhminShirleyIor, BlinnPhongNgan,
+                                                   Lafortune, Phong, Ward, WardDuer)
 from quadrature import normal_incidence_albedo as rgb_normal_incidence_albedo
 
 F64 = torch.float64
 FITS = Path(brdfbench_representations.__file__).with_name("published_fits")  # the shipped copies
 TAGS = frozenset({"isotropic", "reciprocal", "fittable", "analytic"})
-CLASSES = {"ward": "Ward", "ward_duer": "WardDuer", "phong": "Phong", "lafortune": "Lafortune",
+CLASSES = {"ward": "Ward", "ward_duer": "WardDuer", "phong": "Phong", "blinn_phong_ngan": "BlinnPhongNgan",
+           "lafortune": "Lafortune",
            "ashikhmin_shirley": "AshikhminShirley", "ashikhmin_shirley_ior": "AshikhminShirleyIor"}
 #: Each model's published fits: (file, BBM name).
 PUBLISHED = {
     "ward": [("ngan_ward.fit", "NganWard")],
     "ward_duer": [("ngan_wardduer.fit", "NganWardDuer")],
     "phong": [("ngan_blinnphong.fit", "NganBlinnPhong")],
+    "blinn_phong_ngan": [("ngan_blinnphong.fit", "NganBlinnPhong")],
     "lafortune": [("ngan_lafortune.fit", "NganLafortune")],
     "ashikhmin_shirley": [("ngan_ashikhminshirley.fit", "NganAshikhminShirley")],
     "ashikhmin_shirley_ior": [("low_ashikhminshirley_E1.fit", "LowAshikhminShirley"),
@@ -46,6 +48,7 @@ MODERATE = {
     "ward": [dict(alpha=0.05), dict(alpha=0.3)],
     "ward_duer": [dict(alpha=0.05), dict(alpha=0.3)],
     "phong": [dict(exponent=1.5), dict(exponent=40.0), dict(exponent=2000.0)],
+    "blinn_phong_ngan": [dict(exponent=1.5), dict(exponent=40.0), dict(exponent=2000.0)],
     "lafortune": [dict(cxy=-0.6, cz=0.6, exponent=30.0), dict(cxy=-0.8, cz=0.5, exponent=12.0),
                   dict(cxy=-0.4, cz=0.9, exponent=200.0), dict(cxy=0.7, cz=0.7, exponent=8.0),
                   dict(cxy=0.5, cz=-0.3, exponent=3.0)],
@@ -57,6 +60,7 @@ EXTREME = {
     "ward": [dict(alpha=1e-3), dict(alpha=1.0), dict(alpha=0.00509)],
     "ward_duer": [dict(alpha=1e-3), dict(alpha=1.0)],
     "phong": [dict(exponent=1e6), dict(exponent=1e-2), dict(exponent=121000.0)],
+    "blinn_phong_ngan": [dict(exponent=1e6), dict(exponent=1e-2), dict(exponent=121000.0)],
     "lafortune": [dict(cxy=-2.0, cz=2.0, exponent=1e6), dict(cxy=2.0, cz=-2.0, exponent=1e-2),
                   dict(cxy=-0.707, cz=1.23e-10, exponent=2.29), dict(cxy=-0.578, cz=0.577, exponent=16600.0),
                   dict(cxy=2.0, cz=2.0, exponent=1e6), dict(cxy=-1e-3, cz=2.0, exponent=1e6)],
@@ -99,6 +103,8 @@ def reference_lobe(name: str, c: dict, ti, pi, to, po) -> np.ndarray:
         mirror = np.stack((-wi[:, 0], -wi[:, 1], wi[:, 2]), 1)
         cos_a = np.maximum((mirror * wo).sum(1), 0.0)
         return (n + 2) / (2 * math.pi) * cos_a**n
+    if name == "blinn_phong_ngan":  # Blinn 1977's half-vector lobe with Ngan et al.'s (n+2)/(2π)
+        return (c["exponent"] + 2) / (2 * math.pi) * ch ** c["exponent"]
     if name == "lafortune":  # Lafortune et al. 1997, Cx = Cy, times Ngan's (n+2)/(2π max(C²)^(n/2))
         n, cxy, cz = c["exponent"], c["cxy"], c["cz"]
         u = cxy * (wi[:, 0] * wo[:, 0] + wi[:, 1] * wo[:, 1]) + cz * wi[:, 2] * wo[:, 2]
@@ -279,6 +285,7 @@ def near_peak_pairs(n: int, width: float, seed: int = 7):
     ("ward_duer", dict(alpha=0.00509), 2e-2),
     ("phong", dict(exponent=1e6), 1e-3),
     ("phong", dict(exponent=121000.0), 3e-3),
+    ("blinn_phong_ngan", dict(exponent=1e6), 1e-3),
     ("lafortune", dict(cxy=-0.707, cz=0.707, exponent=1e6), 1e-3),
     ("ashikhmin_shirley", dict(exponent=1e6, f0=0.05), 3e-3),
     ("ashikhmin_shirley_ior", dict(exponent=621578.388244, ior=9.79957), 4e-3),
@@ -413,6 +420,7 @@ GOOD = {
     Ward: ("NganWard", {"albedo": [0.05, 0.03, 0.01], "roughness": 0.03}),
     WardDuer: ("NganWardDuer", {"albedo": [0.05, 0.03, 0.01], "roughness": 0.03}),
     Phong: ("NganBlinnPhong", {"albedo": [0.05, 0.03, 0.01], "sharpness": 1290.0}),
+    BlinnPhongNgan: ("NganBlinnPhong", {"albedo": [0.05, 0.03, 0.01], "sharpness": 1290.0}),
     Lafortune: ("NganLafortune", {"albedo": [0.3, 0.2, 0.1], "Cxy": -0.579, "Cz": 0.574, "sharpness": 630.0}),
     AshikhminShirley: ("NganAshikhminShirley", {"albedo": [0.1, 0.06, 0.03], "fresnelReflectance": 0.249, "sharpness": 1350.0}),
     AshikhminShirleyIor: ("LowAshikhminShirley", {"albedo": [0.2, 0.2, 0.2], "fresnelReflectance": 1.45, "sharpness": 6679.5}),
@@ -468,9 +476,9 @@ QUICK = {"n_samples": 4096, "restarts": 1}
 #: Every literature model: tests/unit/test_conformance.py runs the whole kit (fp32 and fp64,
 #: a quick fit) on each registered representation; this checks that the registrations make
 #: it run the physics checks too.
-LITERATURE = ("ward", "ward_duer", "phong", "lafortune", "lafortune2", "lafortune3", "ashikhmin_shirley",
-              "ashikhmin_shirley_ior", "cook_torrance_beckmann", "cook_torrance_1982", "low_smooth",
-              "low_microfacet", "sgd")
+LITERATURE = ("ward", "ward_duer", "phong", "blinn_phong_ngan", "lafortune", "lafortune2", "lafortune3",
+              "ashikhmin_shirley", "ashikhmin_shirley_ior", "cook_torrance_beckmann", "cook_torrance_1982",
+              "low_smooth", "low_microfacet", "sgd", "he")
 
 
 @pytest.mark.parametrize("name", LITERATURE)
@@ -499,6 +507,7 @@ TRUTH = {
     "ward": dict(kd=[0.3, 0.1, 0.05], ks=[0.08, 0.06, 0.04], alpha=0.06),
     "ward_duer": dict(kd=[0.3, 0.1, 0.05], ks=[0.08, 0.06, 0.04], alpha=0.15),
     "phong": dict(kd=[0.2, 0.1, 0.05], ks=[0.5, 0.6, 0.7], exponent=150.0),
+    "blinn_phong_ngan": dict(kd=[0.2, 0.1, 0.05], ks=[0.5, 0.6, 0.7], exponent=400.0),
     "lafortune": dict(kd=[0.2, 0.1, 0.05], ks=[0.5, 0.6, 0.7], cxy=-0.8, cz=0.78, exponent=80.0),
     "ashikhmin_shirley": dict(kd=[0.2, 0.1, 0.05], ks=[0.6, 0.5, 0.4], exponent=400.0, f0=0.3),
     "ashikhmin_shirley_ior": dict(kd=[0.2, 0.1, 0.05], ks=[0.6, 0.5, 0.4], exponent=400.0, ior=2.0),

@@ -55,9 +55,11 @@ def test_literature_profile_runs_every_published_source_and_its_models():
     jobs, cfg = _jobs("profile=literature")
     assert cfg.dataset.name == "nbrdf_release"
     published = {j["representation.params.source"] for j in jobs if j["representation"] == "published_fit"}
-    assert published == set(shipped_sources()) - {"ngan_he"}
+    assert published == set(shipped_sources())
     refitted = {j["representation"] for j in jobs if j["representation"] != "published_fit"}
-    assert {source_model(s) for s in published} | {"ggx", "nbrdf", "lafortune2", "lafortune3"} == refitted
+    assert {source_model(s) for s in published} | {"ggx", "nbrdf", "lafortune2", "lafortune3", "blinn_phong_ngan"} == refitted
+    readings = {j.get("+representation.params.model") for j in jobs if j["representation"] == "published_fit"}
+    assert readings == {None, "blinn_phong_ngan"}
 
 
 def test_full_profile_is_the_previous_default():

@@ -99,15 +99,25 @@ def test_failures_are_excluded_and_counted(frame):
     s = _section(build(frame), "nbrdf_release")
     sgd = _source(s, "bagher_sgd")
     assert (sgd.ok, sgd.failed) == (5, ("m5",))
-    he = _source(s, "ngan_he")  # He et al.'s model is not implemented: no pair, said so
-    assert he.model is None and not he.ours and he.ok == 0 and len(he.failed) == 6
-    assert "no brdfbench model" in he.note
+    he = _source(s, "ngan_he")  # every one of its cells failed here, and we have no fit of its model
+    assert he.model == "he" and not he.ours and he.ok == 0 and len(he.failed) == 6
+    assert he.note == "no fit of ours of `he` in this section: run `representation=he` beside it"
     ward = _source(s, "ngan_ward")
     (o,) = ward.ours
     assert o.config_hash == "h_ward" and o.authors_loss and o.materials == 6  # Ngan et al. fitted with ngan_l2
     assert not any(o.config_hash == "h_ggx" for f in s.sources for o in f.ours)
     md = "\n".join(published_fits_render.markdown(build(frame)))
     assert "failed on 1 (m5), left out" in md and "4 (ours failed on 1)" in md
+
+
+def test_a_source_no_brdfbench_model_evaluates_is_said_so(tmp_path):
+    from brdfbench_leaderboard.published_fits_view import model_of
+
+    path = tmp_path / "mine.fit"
+    path.write_text("alum-bronze = Aggregate(Lambertian(albedo = [0.1, 0.1, 0.1]), Mystery(albedo = [0.05, 0.05, 0.05]))\n",
+                    encoding="utf-8")
+    assert model_of(str(path)) == (None, "no brdfbench model evaluates these fits")
+    assert model_of("ngan_he") == ("he", "")
 
 
 def test_the_caveats_name_what_the_fits_were_made_against(frame):
