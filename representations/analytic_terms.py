@@ -127,10 +127,11 @@ def fresnel_dielectric(eta: Tensor, cos_d: Tensor) -> Tensor:
     F = ½ (g − c)²/(g + c)² · (1 + ((c(g + c) − 1)/(c(g − c) + 1))²); 1 where g² ≤ 0
     (total internal reflection, η < 1)."""
     c = cos_d
-    g2 = eta * eta + c * c - 1.0
+    e = (eta - 1.0) * (eta + 1.0)  # η² − 1, exact to rounding for η near 1 (η − 1 is exact there)
+    g2 = e + c * c  # η² − 1 first: at η ≈ 1 a tiny c² is not lost to rounding
     g = torch.sqrt(g2.clamp(min=0.0))
     s = (g + c).clamp(min=torch.finfo(c.dtype).tiny)
-    g_minus_c = (eta * eta - 1.0) / s  # g² − c² = η² − 1: no cancellation for η near 1
+    g_minus_c = e / s  # g² − c² = η² − 1: no cancellation for η near 1
     a = g_minus_c / s
     b = (c * s - 1.0) / (c * g_minus_c + 1.0)
     f = 0.5 * a * a * (1.0 + b * b)

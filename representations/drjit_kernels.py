@@ -92,10 +92,11 @@ def _ggx_ndf(a2, g: _Geometry):
 def fresnel_dielectric(eta, cos_d):
     """Twin of analytic_terms.fresnel_dielectric (fp32, same clamps)."""
     c = cos_d
-    g2 = eta * eta + c * c - 1.0
+    e = (eta - 1.0) * (eta + 1.0)
+    g2 = e + c * c
     g = dr.sqrt(dr.maximum(g2, 0.0))
     s = dr.maximum(g + c, np.finfo(np.float32).tiny)
-    g_minus_c = (eta * eta - 1.0) / s
+    g_minus_c = e / s
     a = g_minus_c / s
     b = (c * s - 1.0) / (c * g_minus_c + 1.0)
     f = 0.5 * a * a * (1.0 + b * b)
