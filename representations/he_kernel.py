@@ -20,19 +20,12 @@ import numpy as np
 
 from brdfbench.render.drjit_kernels import FLOAT32_MAX, log1p
 
-from .drjit_kernels import AnalyticKernel, _Geometry
+from .drjit_kernels import _Geometry
+from .he_terms import (HALF_LOG_2PI, INV_SQRT_8PI, INV_SQRT_PI, LOG_CAP, M_SWITCH, N_DOWN, N_STRIDED, N_UP, S_MIN,
+                       STIRLERR, T_HI, T_LO, U_MAX)
+from .ngan_kernels import NganKernel
 
 FLOAT32_TINY = float(np.finfo(np.float32).tiny)
-# The numbers of he_model (twins; the kernel imports no model module).
-U_MAX = 40.0
-HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
-INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
-INV_SQRT_8PI = 1.0 / math.sqrt(8.0 * math.pi)
-N_DOWN, N_UP = 37, 56
-M_SWITCH, S_MIN = 38.0, 1.5
-N_STRIDED, T_LO, T_HI = 27, 7.0, 9.0
-STIRLERR = tuple(math.lgamma(m + 1.0) - (m + 0.5) * math.log(m) + m - HALF_LOG_2PI for m in range(1, 8))
-_LOG_CAP = 80.0
 
 
 def lambert_w_log(L):
@@ -99,14 +92,14 @@ def integer_window(g, a, m_c):
     for k in range(N_UP):
         m = m_r + float(k)
         c = c + (dr.log((g / (m + 1.0)) * (m / (m + 1.0))) + a / (m * (m + 1.0)))
-        above = above + dr.exp(dr.minimum(c, _LOG_CAP))
+        above = above + dr.exp(dr.minimum(c, LOG_CAP))
     below = mi.Float(0.0)
     c = mi.Float(0.0)
     for k in range(N_DOWN):
         m = m_r - float(k)
         d = dr.maximum(m, 2.0)
         c = c - (dr.log((g / d) * ((d - 1.0) / d)) + a / ((d - 1.0) * d))
-        below = below + dr.select(m >= 2.0, dr.exp(dr.minimum(c, _LOG_CAP)), 0.0)
+        below = below + dr.select(m >= 2.0, dr.exp(dr.minimum(c, LOG_CAP)), 0.0)
     return log_term(m_r, g, a) + dr.log(1.0 + above + below)
 
 
@@ -164,17 +157,11 @@ def log_shadowing(q, cos, sin2):
     return log1p(-0.5 * e) - log1p(lam), q * e / u
 
 
-class HeKernel(AnalyticKernel):
+class HeKernel(NganKernel):
     """k_d/π + k_s ⊙ ρ_dd with an RGB lobe (one series per channel's wavelength)."""
 
     name = "he"
-
-    def __init__(self, model):
-        self.model_cls = type(model)  # taken from the model: this module imports no model
-        super().__init__(model)
-
-    def constants(self, c):
-        return self.model_cls.constants(c)
+    model_name = "he"
 
     def lobe(self, g: _Geometry) -> list:
         """The three channels' ρ_dd (twin of he_model.he_lobe)."""

@@ -60,32 +60,11 @@ import torch
 
 from .analytic import _KD, Coefficient
 from .analytic_terms import Geometry
+from .he_terms import (CHUNK, HALF_LOG_2PI, INV_SQRT_8PI, INV_SQRT_PI, LOG_CAP, M_SWITCH, N_DOWN, N_STRIDED, N_UP,
+                       S_MIN, STIRLERR, T_HI, T_LO, U_MAX, WAVELENGTHS_UM)
 from .ngan_models import NganBRDF
 
 Tensor = torch.Tensor
-
-#: λ of the R, G, B channels in µm (BBM's rgbConfig::wavelength).
-WAVELENGTHS_UM = (0.645, 0.526, 0.444)
-#: Beyond this u = τ cotθ/(2σ0), erfc(u) and e^{−u²} are 0 in fp64: S = 1, K = 0.
-U_MAX = 40.0
-HALF_LOG_2PI = 0.5 * math.log(2.0 * math.pi)
-INV_SQRT_PI = 1.0 / math.sqrt(math.pi)
-INV_SQRT_8PI = 1.0 / math.sqrt(8.0 * math.pi)
-
-# The series' windows (module docstring).
-#: integer terms below and above round(m_c)
-N_DOWN, N_UP = 37, 56
-#: the trapezoid rule where m_c ≥ M_SWITCH and s ≥ S_MIN
-M_SWITCH, S_MIN = 38.0, 1.5
-#: its nodes, over [m_c − T_LO s, m_c + T_HI s] (the lower end at most m_c − 1)
-N_STRIDED, T_LO, T_HI = 27, 7.0, 9.0
-#: Stirling's remainder lgamma(m+1) − (m + ½) log m + m − ½ log 2π at m = 1..7 (exact);
-#: from m = 8 its asymptotic series (error < 3e-13).
-STIRLERR = tuple(math.lgamma(m + 1.0) - (m + 0.5) * math.log(m) + m - HALF_LOG_2PI for m in range(1, 8))
-#: elements per block of the windows' (elements × terms) arrays
-CHUNK = 1 << 15
-#: a log-ratio of neighbouring terms is capped here (never reached with m_c as found: a guard)
-_LOG_CAP = 80.0
 
 # FLOPS, counted as in analytic.py (each add, multiply, divide, sqrt, exp, log, erfc, round,
 # clamp or select one operation; per-material constants hoisted). Shared by the channels:
@@ -178,12 +157,12 @@ def _integer_window(g: Tensor, a: Tensor, m_c: Tensor) -> Tensor:
     up = m_r[:, None] + torch.arange(N_UP, dtype=g.dtype, device=g.device)  # the node below each step
     gg, aa = g[:, None], a[:, None]
     step = torch.log((gg / (up + 1.0)) * (up / (up + 1.0))) + aa / (up * (up + 1.0))
-    above = torch.exp(torch.cumsum(step, dim=1).clamp(max=_LOG_CAP)).sum(dim=1)
+    above = torch.exp(torch.cumsum(step, dim=1).clamp(max=LOG_CAP)).sum(dim=1)
     down = m_r[:, None] - torch.arange(N_DOWN, dtype=g.dtype, device=g.device)  # the node above each step
     valid = down >= 2.0
     d = down.clamp(min=2.0)
     step = torch.log((gg / d) * ((d - 1.0) / d)) + aa / ((d - 1.0) * d)
-    terms = torch.exp((-torch.cumsum(step, dim=1)).clamp(max=_LOG_CAP))
+    terms = torch.exp((-torch.cumsum(step, dim=1)).clamp(max=LOG_CAP))
     below = torch.where(valid, terms, torch.zeros_like(terms)).sum(dim=1)
     return log_term(m_r, g, a) + torch.log(1.0 + above + below)
 

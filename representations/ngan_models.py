@@ -253,8 +253,7 @@ class BlinnPhongNgan(NganBRDF):
 
     @classmethod
     def constants(cls, c):
-        n = c["exponent"].clamp(min=0.0)
-        return {"n": n, "norm": (n + 2.0) / (2.0 * math.pi)}
+        return Phong.constants(c)  # the same n and (n + 2)/(2π): only the lobe's angle differs
 
     @classmethod
     def lobe(cls, g, c):
