@@ -10,6 +10,7 @@ worker's resident memory (`process_rss`, `process_peak`, from /proc/<pid>/status
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 from pathlib import Path
@@ -92,9 +93,12 @@ def parse_size(value, key: str = "harness.memory_limit") -> int | None:
 
 
 def format_size(n: int | float, whole: bool = False) -> str:
-    """`n` bytes in MiB for messages: "1500 MiB", "1430.5 MiB" (`whole`: "1431 MiB")."""
+    """`n` bytes in MiB for messages: "1500 MiB", "1430.5 MiB" (`whole`: "1431 MiB", rounded up, so that a peak
+    just over a limit never reads as the limit itself)."""
     mib = n / 2**20
-    return f"{mib:.0f} MiB" if whole or abs(mib - round(mib)) < 0.05 or mib >= 10000 else f"{mib:.1f} MiB"
+    if whole:
+        return f"{math.ceil(mib)} MiB"
+    return f"{mib:.0f} MiB" if abs(mib - round(mib)) < 0.05 or mib >= 10000 else f"{mib:.1f} MiB"
 
 
 PROC = Path("/proc")

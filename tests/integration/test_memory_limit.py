@@ -95,6 +95,12 @@ def test_format_size_reads_back_to_the_same_mib(mib):
     assert parse_size(format_size(mib * MiB).replace(" ", "")) == mib * MiB
 
 
+@given(st.integers(min_value=1, max_value=10**4), st.integers(min_value=1, max_value=MiB - 1))
+def test_a_whole_peak_just_over_a_limit_reads_over_it(mib, extra):
+    assert format_size(mib * MiB, whole=True) == f"{mib} MiB"
+    assert format_size(mib * MiB + extra, whole=True) == f"{mib + 1} MiB"
+
+
 # --------------------------------------------------------------------------- config and hash
 
 
