@@ -92,7 +92,8 @@ class DatasetSpec(PluginSpec):
 
 @dataclass(frozen=True)
 class MetricSpec(PluginSpec):
-    """A metric; `target` is a `brdfbench_metrics.base.Metric` subclass."""
+    """A metric; `target` is a class implementing one of `brdfbench.metric_protocol`'s
+    protocols (`Metric`, `ImageMetric`, `SetMetric`, `ImageSetMetric`), by its `domain`."""
 
     unit: str = ""
     higher_is_better: bool = False

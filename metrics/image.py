@@ -13,16 +13,16 @@ from typing import Any, Callable, ClassVar
 
 import torch
 
+from brdfbench.metric_protocol import ImageMetric as ImageMetricProtocol
+
 from . import image_functional as IF
-from .base import Metric
 
 
-class ImageMetric(Metric):
+class ImageMetric(ImageMetricProtocol):
     """Mean over images of a per-image value; subclasses set `fn`, `space`, `unit`, `higher_is_better`."""
 
     fn: ClassVar[Callable]
     space: ClassVar[str]
-    domain: ClassVar[str] = "image"
     #: True: `fn` is torch and takes `device`; False (FLIP): it computes on the CPU.
     torch_device: ClassVar[bool] = True
 
@@ -34,13 +34,9 @@ class ImageMetric(Metric):
         self.device = None if device is None else torch.device(device)
         super().__init__()
 
-    def update(self, pred: torch.Tensor, target: torch.Tensor) -> None:  # type: ignore[override]
-        """Add one image (H, W, 3) or a batch (N, H, W, 3) of images."""
+    def values(self, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         where = {"device": self.device} if self.device is not None and type(self).torch_device else {}
-        values = type(self).fn(pred, target, space=self.space, reduction="none", **where, **self.options)
-        values = values.reshape(-1)
-        self._sum += float(values.sum())
-        self._count += values.numel()
+        return type(self).fn(pred, target, space=self.space, reduction="none", **where, **self.options)
 
 
 class MSE(ImageMetric):

@@ -11,25 +11,9 @@ the job names none) for its own heavy work (FID: the network's feature extractio
 
 from __future__ import annotations
 
-from typing import ClassVar
+from brdfbench.metric_protocol import ImageSetMetric, SetMetric
 
 from . import distributional as dist
-
-
-class SetMetric:
-    """A figure of S against R over one distance; `unit_for(distance_unit)` is its stored unit."""
-
-    domain: ClassVar[str] = "set"
-    unit: ClassVar[str] = ""
-    higher_is_better: ClassVar[bool] = False
-    #: True: `compute` takes `device=` (the job's device) for its own work.
-    uses_device: ClassVar[bool] = False
-
-    def unit_for(self, distance_unit: str) -> str:
-        return self.unit
-
-    def compute(self, d_rr, d_ss, d_rs) -> float:
-        raise NotImplementedError
 
 
 class MMD(SetMetric):
@@ -63,13 +47,11 @@ class OneNNA(SetMetric):
         return 100.0 * dist.one_nna(d_rr, d_ss, d_rs)
 
 
-class FID:
+class FID(ImageSetMetric):
     """Fréchet Inception distance between the rendered images of R and S (standard InceptionV3)."""
 
-    domain: ClassVar[str] = "image_set"
-    unit: ClassVar[str] = "1"
-    higher_is_better: ClassVar[bool] = False
-    uses_device: ClassVar[bool] = True
+    unit = "1"
+    uses_device = True
 
     def compute(self, images_r, images_s, *, device=None) -> float:
         """`device` (None: the CPU): where InceptionV3 extracts the features; the distance
