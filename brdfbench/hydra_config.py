@@ -12,7 +12,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from . import parallelism
 from .errors import ConfigError
-from .runner import RunConfig, harness_config
+from .pipeline.config import RunConfig, harness_config
 
 JOB_SUMMARY = "brdfbench_job.json"
 #: Summaries of the jobs run in this process, so the end of the sweep has them even where a

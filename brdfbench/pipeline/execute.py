@@ -28,10 +28,10 @@ from .. import artifacts, modelio
 from ..errors import BrdfbenchError, ConfigError, DataError, RenderError, os_error
 from ..harness import HarnessContext, Measurement
 from ..harness.cost import fit_loss, model_size
-from . import calibration, fit_pool
+from . import calibration, fit_pool, plan
 from .config import RunConfig
 from .memory import peak_rss, reset_peak
-from .plan import Checked, Task, check, config_hash, hashed_config, parallel_fits
+from .plan import Checked, Task, config_hash, hashed_config, parallel_fits
 from .progress import mode as progress_mode
 
 log = logging.getLogger(__name__)
@@ -61,8 +61,11 @@ class JobState:
         return model if self.device.type == "cpu" else model.to(self.device)
 
 
-def job_state(job: RunConfig) -> JobState:
-    checked = check(job)
+def job_state(job: RunConfig, checked: Checked | None = None) -> JobState:
+    """The job's state, on `checked` where the caller has it (an in-process run). A worker
+    process checks the job itself, once per job: what the supervisor loaded (plugins, data)
+    does not cross the process boundary."""
+    checked = plan.check(job) if checked is None else checked
     asked = devices.resolve(job.device)
     context = HarnessContext(
         scene=checked.scene, metric_specs=checked.metric_specs, seed=job.seed, results_dir=job.results_dir,

@@ -105,27 +105,9 @@ def check_params(cls, params: dict[str, Any], where: str, internal: tuple[str, .
             raise ConfigError(f"unknown key {where}.{key}; {where} takes: {allowed}")
 
 
-#: Jobs validated ahead of their run in this process (a sweep's start), taken once by `check`.
-_PRECHECKED: dict[str, Checked] = {}
-
-
-def _key(job: RunConfig) -> str:
-    return repr((job.plugin_group, job.plugin, job.plugin_params, job.dataset, job.dataset_params, job.harness,
-                 job.scene, job.scene_params, job.materials, job.limit, job.device))
-
-
-def precheck(job: RunConfig) -> Checked:
-    """`check` now, kept for this job's run in this process to take (so it is not done twice)."""
-    checked = check(job)
-    _PRECHECKED[_key(job)] = checked
-    return checked
-
-
 def check(job: RunConfig) -> Checked:
-    """Load and check every plugin the job names, and its data, before any work."""
-    kept = _PRECHECKED.pop(_key(job), None)
-    if kept is not None:
-        return kept
+    """Load and check every plugin the job names, and its data, before any work (once per
+    job and process: the caller keeps the result for the job's run)."""
     check_params(registry.get("stores", job.store).load(), job.store_params, "store_params",
                  internal=("results_dir", "create"))
     harness_cls = harness_class(job.harness.kind)

@@ -63,6 +63,28 @@ def _basic_launcher(launcher: Any) -> bool:
     return type(launcher).__name__ == "BasicLauncher"
 
 
+def parallel_workers(config: Any, n_jobs: int) -> int:
+    """How many of a sweep's `n_jobs` jobs run at once in joblib's process pool under the
+    basic launcher (1: one after another, in this process): `workers` where the machine has
+    the cores and joblib's plugin is installed."""
+    import importlib
+
+    from brdfbench import parallelism
+    from brdfbench.errors import ConfigError
+
+    try:
+        workers, _ = parallelism.resolve(config.get("workers", "auto"), config.get("threads", "auto"), n_jobs)
+    except ConfigError:
+        return 1  # the jobs' validation reports it
+    if workers < 2:
+        return 1
+    try:
+        importlib.import_module("hydra_plugins.hydra_joblib_launcher.joblib_launcher")
+    except ImportError:
+        return 1  # without joblib's plugin the jobs run one at a time
+    return workers
+
+
 class SectionSweeper(BasicSweeper):
     """Hydra's basic sweeper over the main sweep and a profile's sections, in one batch;
     parallel jobs where the machine has the cores (see the module docstring)."""
@@ -83,19 +105,13 @@ class SectionSweeper(BasicSweeper):
         import os
 
         from brdfbench import parallelism
-        from brdfbench.errors import ConfigError
 
-        try:
-            workers, threads = parallelism.resolve(self.config.get("workers", "auto"), self.config.get("threads", "auto"),
-                                                   len(jobs))
-        except ConfigError:
-            return self.launcher, jobs  # the jobs' validation reports it
-        if workers < 2 or not _basic_launcher(self.launcher):
+        workers = parallel_workers(self.config, len(jobs)) if _basic_launcher(self.launcher) else 1
+        if workers < 2:
             return self.launcher, jobs
-        try:
-            from hydra_plugins.hydra_joblib_launcher.joblib_launcher import JoblibLauncher
-        except ImportError:
-            return self.launcher, jobs  # without joblib's plugin the jobs run one at a time
+        from hydra_plugins.hydra_joblib_launcher.joblib_launcher import JoblibLauncher
+
+        _, threads = parallelism.resolve(self.config.get("workers", "auto"), self.config.get("threads", "auto"), len(jobs))
         launcher = JoblibLauncher(n_jobs=workers, backend="loky", prefer="processes", batch_size=1,
                                   pre_dispatch="n_jobs")
         launcher.setup(hydra_context=self.hydra_context, task_function=self.task_function, config=self.config)

@@ -10,7 +10,8 @@ import pytest
 import torch
 
 from brdfbench import registry
-from brdfbench.runner import RunConfig, harness_config, run
+from brdfbench.pipeline.config import RunConfig, harness_config
+from brdfbench.pipeline.sweep import run_job as run
 from brdfbench.specs import RepresentationSpec
 from brdfbench.store import ResultsStore
 from brdfbench_representations.lambert import Lambert

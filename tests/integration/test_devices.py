@@ -13,7 +13,8 @@ from brdfbench import device as devices
 from brdfbench import registry
 from brdfbench.errors import ConfigError
 from brdfbench.pipeline.plan import check, config_hash, hashed_config
-from brdfbench.runner import RunConfig, harness_config, run
+from brdfbench.pipeline.config import RunConfig, harness_config
+from brdfbench.pipeline.sweep import run_job as run
 from brdfbench.specs import RepresentationSpec
 from brdfbench.store import ResultsStore
 from brdfbench_representations.lambert import Lambert

@@ -11,7 +11,8 @@ import torch
 from brdfbench import registry
 from brdfbench.errors import ConfigError
 from brdfbench.generator_protocol import TrainingData
-from brdfbench.runner import RunConfig, harness_config, run
+from brdfbench.pipeline.config import RunConfig, harness_config
+from brdfbench.pipeline.sweep import run_job as run
 from brdfbench.specs import GeneratorSpec
 from brdfbench.store import ResultsStore
 from brdfbench_generators.samples import TableSamples

@@ -12,7 +12,8 @@ import time
 import pytest
 import torch
 
-from brdfbench.runner import RunConfig, harness_config, run
+from brdfbench.pipeline.config import RunConfig, harness_config
+from brdfbench.pipeline.sweep import run_job as run
 from brdfbench.store import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
@@ -136,7 +137,8 @@ def test_a_script_without_a_main_guard_runs_once(tmp_path, synthetic_cache):
 
     script = tmp_path / "bench.py"
     script.write_text(
-        "from brdfbench.runner import RunConfig, harness_config, run\n"
+        "from brdfbench.pipeline.config import RunConfig, harness_config\n"
+        "from brdfbench.pipeline.sweep import run_job as run\n"
         "print('script body ran')\n"
         f"print(run(RunConfig(representation='merl', representation_params={{}}, label='merl', dataset='synthetic',"
         f" dataset_params={{'size': 'small', 'cache_dir': {str(synthetic_cache)!r}}},"

@@ -21,7 +21,8 @@ from brdfbench.pipeline.memory import format_size, parse_size, process_rss
 from brdfbench.pipeline.plan import hashed_config
 from brdfbench.pipeline.worker import shared_worker
 from brdfbench.provenance import config_hash
-from brdfbench.runner import RunConfig, run
+from brdfbench.pipeline.config import RunConfig
+from brdfbench.pipeline.sweep import run_job as run
 from brdfbench.store import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
@@ -191,9 +192,9 @@ def test_a_limit_below_a_fresh_worker_fails_its_cells_naming_it(tmp_path, synthe
 
 
 def test_in_process_runs_warn_that_the_limit_is_not_enforced(tmp_path, synthetic_cache, caplog):
-    from brdfbench import runner
+    from brdfbench.pipeline import sweep
 
-    runner._INLINE_WARNED.discard("memory_limit")
+    sweep._INLINE_WARNED.discard("memory_limit")
     with caplog.at_level(logging.WARNING):
         counts = run(_cfg(tmp_path, synthetic_cache, "lambert", harness=replace(QUICK, memory_limit="20MiB"), limit=1,
                           isolate=False))

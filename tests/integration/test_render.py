@@ -17,7 +17,8 @@ from brdfbench.render import sphere
 from brdfbench.render.camera import Camera
 from brdfbench.render.closed_form import ClosedForm
 from brdfbench.render.simulate import build_simulator
-from brdfbench.runner import RunConfig, harness_config, run
+from brdfbench.pipeline.config import RunConfig, harness_config
+from brdfbench.pipeline.sweep import run_job as run
 from brdfbench.specs import RepresentationSpec
 from brdfbench.store import ResultsStore
 from brdfbench_representations.lambert import Lambert

@@ -7,7 +7,8 @@ import pytest
 
 from brdfbench.errors import ConfigError
 from brdfbench.report import write_reports
-from brdfbench.runner import RunConfig, harness_config, run
+from brdfbench.pipeline.config import RunConfig, harness_config
+from brdfbench.pipeline.sweep import run_job as run
 from brdfbench.store import ResultsStore
 from brdfbench_representations.lambert import Lambert
 

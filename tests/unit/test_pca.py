@@ -12,7 +12,7 @@ from brdfbench.errors import ConfigError, DataError, ModelFileError
 from brdfbench.harness.accuracy import evaluate_accuracy
 from brdfbench.protocol import Material
 from brdfbench.registry import get
-from brdfbench.runner import plan_folds
+from brdfbench.pipeline.plan import plan_folds
 from brdfbench.testing.kit import reference_material, training_materials
 from brdfbench_representations.pca import PCA, _domain
 

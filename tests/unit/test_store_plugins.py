@@ -92,7 +92,8 @@ def test_a_damaged_value_stops_the_merge_naming_the_store(tmp_path):
 
 
 def test_the_runner_writes_through_the_chosen_store(tmp_path, synthetic_cache):
-    from brdfbench.runner import RunConfig, harness_config, run
+    from brdfbench.pipeline.config import RunConfig, harness_config
+    from brdfbench.pipeline.sweep import run_job as run
 
     registry.register("stores", StoreSpec(name="sqlite_elsewhere", description="test: the sqlite store, renamed",
                                           target=f"{__name__}:elsewhere"))
