@@ -7,7 +7,8 @@ leaderboard). Subcommands that need no config:
     brdfbench list                      one line per registered plugin
     brdfbench report [--results DIR]    regenerate the leaderboard from the results store
     brdfbench merge SRC... --into DIR   copy the cells of other results folders into DIR's store
-    brdfbench check NAME                run the conformance kit on a representation, generator or sampler
+    brdfbench check NAME                run the conformance kit on a plugin (representation, generator,
+                                        sampler, metric, harness or dataset)
     brdfbench inspect MODEL.safetensors describe a saved model or generator (loads no code)
     brdfbench convert SRC DEST          convert neural-BRDF weights between formats
                                         (.h5, .npy 675-vector, .pt state_dict, .safetensors)
@@ -98,7 +99,8 @@ def cmd_check(args) -> int:
 
     if args.timeout <= 0:
         return _fail(f"--timeout must be a positive number of seconds, not {args.timeout:g}")
-    groups = {"representation": "representations", "generator": "generators", "sampler": "samplers"}
+    groups = {"representation": "representations", "generator": "generators", "sampler": "samplers",
+              "metric": "metrics", "harness": "harnesses", "dataset": "datasets"}
     kind = args.kind
     if kind is None:  # the first kind that has the name (a sampler may share a model's name: --kind)
         kind = next((k for k, group in groups.items() if args.name in registry.names(group)), "representation")
@@ -165,14 +167,16 @@ def _subcommand_parser() -> argparse.ArgumentParser:
     p.add_argument("--into", required=True, metavar="DIR", help="results folder to merge into (created if new)")
     p.add_argument("--store", default="sqlite", help="results store plugin of all of them (default: sqlite)")
     p.set_defaults(func=cmd_merge)
-    p = sub.add_parser("check", help="run the conformance kit on a registered representation, generator or sampler")
+    p = sub.add_parser("check", help="run the conformance kit on a registered representation, generator, sampler, "
+                                     "metric, harness or dataset")
     p.add_argument("name")
-    p.add_argument("--kind", choices=("representation", "generator", "sampler"), default=None,
-                   help="the plugin kind (default: the first of these that has the name)")
+    p.add_argument("--kind", choices=("representation", "generator", "sampler", "metric", "harness", "dataset"),
+                   default=None, help="the plugin kind (default: the first of these that has the name)")
     p.add_argument("--pairs", type=int, default=10**6, help="adversarial direction pairs per dtype (default 1e6)")
     p.add_argument("--full", action="store_true",
                    help="a representation or generator with its default parameters, not its quick check_params; "
-                        "a sampler over the full chi-square sweep, not the quick one")
+                        "a sampler over the full chi-square sweep, not the quick one; an image-set metric scored; "
+                        "a rendering harness measured, with its full sizes; a dataset's weight vectors read")
     p.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",
                    help="time limit of each check, run in a worker process (default 600)")
     p.set_defaults(func=cmd_check)

@@ -59,8 +59,8 @@ from tqdm.auto import tqdm
 
 from brdfbench.errors import ConfigError, DataError, ModelFileError
 from brdfbench.generator_protocol import TRAINING_CURVE_KEY, Generator, SampleSet, TrainingData, WeightSet
+from brdfbench.generator_state import read_layout, weight_layout
 from brdfbench.nbrdf import network as net
-from brdfbench.nbrdf.layouts import check_hidden
 
 from .samples import WeightSamples
 
@@ -465,7 +465,7 @@ class HyperDiffusion(Generator):
         ws = data.weights()
         self._check_weight_set(ws)
         self.classes, labels = self._labels(data, ws.names)
-        self.layout = {"hidden": list(ws.hidden), "features": ws.features, "raw_units": bool(ws.raw_units)}
+        self.layout = weight_layout(ws)
         x = torch.from_numpy(np.ascontiguousarray(ws.vectors, dtype=np.float32))
         # Per-coordinate standardisation: aligned NBRDF weights span scales from ~1e-3 (weights
         # that barely move from the shared initialisation) to ~1 (output biases). Diffusion adds
@@ -741,23 +741,21 @@ class HyperDiffusion(Generator):
         return gen
 
     def _read_metadata(self, metadata: dict[str, Any]) -> None:
-        """The NBRDF layout and class names from a saved file's metadata, checked."""
-        hidden, classes = metadata.get("hidden"), metadata.get("classes", [])
-        widths = check_hidden(hidden, f"{NAME} metadata 'hidden'")
-        if self.params["hidden"] is not None and list(widths) != self.params["hidden"]:
-            raise ModelFileError(f"{NAME}: metadata hidden={list(widths)} contradicts param hidden={self.params['hidden']}")
+        """The NBRDF layout (saved beside the other keys) and class names from a saved file's
+        metadata, checked."""
+        layout = read_layout(NAME, metadata, "metadata")
+        if self.params["hidden"] is not None and layout["hidden"] != list(self.params["hidden"]):
+            raise ModelFileError(f"{NAME}: metadata hidden={layout['hidden']} contradicts param hidden={self.params['hidden']}")
+        classes = metadata.get("classes", [])
         if not isinstance(classes, list) or not all(isinstance(c, str) for c in classes):
             raise ModelFileError(f"{NAME}: metadata 'classes' must be a list of category names")
         if bool(classes) != (self.params["condition_on"] is not None):
             raise ModelFileError(f"{NAME}: metadata names {len(classes)} classes but condition_on="
                                  f"{self.params['condition_on']!r}")
-        features = metadata.get("features", "rusinkiewicz")
-        if features not in net.FEATURES:
-            raise ModelFileError(f"{NAME}: metadata 'features'={features!r} must be one of {list(net.FEATURES)}")
         rank = metadata.get("prior_rank", 0)
         if isinstance(rank, bool) or not isinstance(rank, int) or rank < 0:
             raise ModelFileError(f"{NAME}: metadata 'prior_rank'={rank!r} must be a non-negative integer")
-        self.layout = {"hidden": list(widths), "features": features, "raw_units": bool(metadata.get("raw_units", False))}
+        self.layout = layout
         self.classes = list(classes)
         training = metadata.get("training", {})
         self.curve = dict(training) if isinstance(training, dict) else {}

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -40,7 +39,7 @@ from tqdm.auto import tqdm
 from brdfbench import logrel, merl
 from brdfbench.errors import ConfigError, ModelFileError
 from brdfbench.generator_protocol import Generator, ResourceError, SampleSet, TrainingData, WeightSet, available_memory
-from brdfbench.nbrdf.network import n_weights
+from brdfbench.generator_state import check_layout, check_tensor, read_layout, weight_layout
 from brdfbench_representations.pca import values_on_domain
 
 from .samples import TableSamples, WeightSamples
@@ -177,24 +176,6 @@ def domain_table(on_domain: torch.Tensor) -> merl.MerlTable:
     valid = np.zeros(merl.N_CELLS, dtype=bool)
     valid[cells] = True
     return merl.MerlTable.from_values(values.reshape(3, *merl.SHAPE), valid.reshape(merl.SHAPE))
-
-
-def check_tensor(owner: str, tensors: dict[str, torch.Tensor], name: str, shape: Sequence[int | None],
-                 dtype: torch.dtype, *, nonnegative: bool = False) -> torch.Tensor:
-    """tensors[name], checked for presence, shape (None: any extent), dtype and finiteness."""
-    if name not in tensors:
-        raise ModelFileError(f"{owner}: the model file lacks tensor {name!r}")
-    t = tensors[name]
-    if t.ndim != len(shape) or any(s is not None and t.shape[i] != s for i, s in enumerate(shape)):
-        want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
-        raise ModelFileError(f"{owner}: tensor {name!r} has shape {tuple(t.shape)}, expected {want}")
-    if t.dtype != dtype:
-        raise ModelFileError(f"{owner}: tensor {name!r} has dtype {t.dtype}, expected {dtype}")
-    if not torch.isfinite(t).all():
-        raise ModelFileError(f"{owner}: tensor {name!r} has non-finite values")
-    if nonnegative and (t < 0).any():
-        raise ModelFileError(f"{owner}: tensor {name!r} has negative values")
-    return t
 
 
 def check_components(owner: str, tensors: dict, k_max: int, name: str = "std") -> int:
@@ -363,12 +344,6 @@ class PCABRDF(Generator):
 # --------------------------------------------------------------------------- PCA-N
 
 
-def weight_layout(ws: WeightSet) -> dict[str, Any]:
-    """The NBRDF layout of a weight set, as JSON-able metadata."""
-    return {"hidden": list(ws.hidden), "features": ws.features, "raw_units": bool(ws.raw_units),
-            "width": int(ws.vectors.shape[1])}
-
-
 def training_vectors(owner: str, expected: dict[str, Any] | None, data: TrainingData) -> WeightSet:
     """The split's weight vectors, in the layout a fitted or loaded model holds and at least
     two of them (a principal direction, or a held-out loss, needs two)."""
@@ -377,33 +352,6 @@ def training_vectors(owner: str, expected: dict[str, Any] | None, data: Training
     if ws.vectors.shape[0] < 2:
         raise ConfigError(f"{owner}: needs at least 2 training weight vectors, got {ws.vectors.shape[0]}")
     return ws
-
-
-def check_layout(owner: str, expected: dict[str, Any] | None, ws: WeightSet) -> None:
-    """Refuse a weight set whose layout differs from the one a fitted or loaded model holds."""
-    if expected is None:
-        return
-    got = weight_layout(ws)
-    if got != expected:
-        raise ConfigError(f"{owner}: this generator holds a model of {expected['width']}-value weight vectors "
-                          f"(hidden {expected['hidden']}, {expected['features']}); the weight set has "
-                          f"{got['width']} (hidden {got['hidden']}, {got['features']}): create a new generator")
-
-
-def layout_from_metadata(owner: str, metadata: dict) -> dict[str, Any]:
-    """The saved layout, checked (hidden sizes, features, width consistent)."""
-    layout = metadata.get("layout")
-    try:
-        hidden = [int(h) for h in layout["hidden"]]
-        result = {"hidden": hidden, "features": str(layout["features"]),
-                  "raw_units": bool(layout["raw_units"]), "width": int(layout["width"])}
-    except (TypeError, KeyError, ValueError):
-        raise ModelFileError(f"{owner}: metadata 'layout' must hold hidden, features, raw_units and width, "
-                             f"got {layout!r}") from None
-    if n_weights(tuple(hidden)) != result["width"]:
-        raise ModelFileError(f"{owner}: metadata 'layout' says width {result['width']}, a network with hidden "
-                             f"{hidden} has {n_weights(tuple(hidden))} weights")
-    return result
 
 
 def weight_samples(array: torch.Tensor, layout: dict[str, Any]) -> WeightSamples:
@@ -469,7 +417,7 @@ class PCANBRDF(Generator):
         if not tensors:
             return model
         owner = f"{cls.NAME} model"
-        layout = layout_from_metadata(owner, metadata)
+        layout = read_layout(owner, metadata.get("layout"))
         w = layout["width"]
         k = check_components(owner, tensors, min(model.params["k"], w))
         model.std = check_tensor(owner, tensors, "std", (k,), torch.float64, nonnegative=True)

@@ -78,11 +78,11 @@ from brdfbench import logrel, merl
 from brdfbench.errors import ConfigError, ModelFileError
 from brdfbench.threads import torch_threads
 from brdfbench.generator_protocol import TRAINING_CURVE_KEY, Generator, SampleSet, TrainingData
+from brdfbench.generator_state import check_tensor, read_layout, weight_layout
 
 from .pca import (
-    FIT_OVERHEAD, MAX_MAPPED, values_on_domain, block_columns, check_fit_memory, check_tensor,
-    chunked_combine, domain_table, gram_pca, layout_from_metadata, positive_int, select_names, weight_layout,
-    training_vectors, weight_samples,
+    FIT_OVERHEAD, MAX_MAPPED, values_on_domain, block_columns, check_fit_memory, chunked_combine, domain_table,
+    gram_pca, positive_int, select_names, training_vectors, weight_samples,
 )
 from .samples import TableSamples
 
@@ -413,7 +413,7 @@ class VAENBRDF(Generator):
         if not tensors:
             return model
         owner = f"{cls.NAME} model"
-        layout = layout_from_metadata(owner, metadata)
+        layout = read_layout(owner, metadata.get("layout"))
         w = layout["width"]
         model.mean = check_tensor(owner, tensors, "mean", (w,), torch.float32)
         model.std = check_tensor(owner, tensors, "std", (w,), torch.float32, nonnegative=True)

@@ -91,4 +91,5 @@ class Dataset:
             chosen = chosen[:limit]
         kept = set(chosen)
         splits = None if self.splits is None else {k: tuple(m for m in v if m in kept) for k, v in self.splits.items()}
-        return Dataset(self.name, tuple(chosen), self.loader, self.fingerprint, self.categories, splits, self.weights)
+        categories = None if self.categories is None else {m: c for m, c in self.categories.items() if m in kept}
+        return Dataset(self.name, tuple(chosen), self.loader, self.fingerprint, categories, splits, self.weights)

@@ -16,17 +16,25 @@ a spec's `xfail_checks` maps a check name to the reason it is expected to fail, 
 `check_params` are the constructor arguments of the default, quick run (a short fit, say);
 `full=True` (`brdfbench check NAME --full`) checks the representation's defaults.
 
-Generators and samplers have kits of their own: `check_generator("pca_brdf")` /
-`generator_checks` (`brdfbench.testing.generators`) and `check_sampler("ggx")` /
-`sampler_checks` (`brdfbench.testing.samplers`, with Mitsuba's χ² test).
+Every other plugin kind has a kit of its own, each returning a `ConformanceReport`:
+`check_generator("pca_brdf")` / `generator_checks` (`brdfbench.testing.generators`),
+`check_sampler("ggx")` / `sampler_checks` (`brdfbench.testing.samplers`, with Mitsuba's
+χ² test), `check_metric("my_metric")` / `metric_checks` (`brdfbench.testing.metrics`, by the
+metric's domain), `check_harness("my_harness")` / `harness_checks`
+(`brdfbench.testing.harnesses`: typed config, hash, validation, measuring) and
+`check_dataset("my_dataset", params={...})` / `dataset_checks`
+(`brdfbench.testing.datasets`). `brdfbench check NAME --kind KIND` runs any of them with
+each check isolated in a worker process (`brdfbench.testing.isolated`).
 """
 
 from __future__ import annotations
 
 from .adversarial import FAMILIES, adversarial_pairs
+from .datasets import check_dataset, dataset_checks
 from .generators import check_generator, generator_checks
+from .harnesses import check_harness, harness_checks
 from .kit import Check, ConformanceReport, check_representation, representation_checks
-from .metrics import check_metric
+from .metrics import check_metric, metric_checks
 from .samplers import check_sampler, sampler_checks
 
 __all__ = [
@@ -34,9 +42,14 @@ __all__ = [
     "Check",
     "ConformanceReport",
     "adversarial_pairs",
+    "check_dataset",
     "check_generator",
+    "check_harness",
     "check_metric",
+    "dataset_checks",
     "generator_checks",
+    "harness_checks",
+    "metric_checks",
     "check_representation",
     "check_sampler",
     "representation_checks",

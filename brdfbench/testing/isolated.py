@@ -3,11 +3,12 @@
 `brdfbench check` certifies code it does not trust: a plugin that segfaults, ends the
 process (`os._exit`) or hangs must fail the check it is in, not take the command down.
 The check names are enumerated by the first worker from the kit (`representation_checks`,
-`generator_checks`, `sampler_checks`: the plugin is never imported by the command itself); the checks run
-in order in one spawned worker, which keeps the kit's
-context (the fitted model) from one check to the next. When the worker dies or a check
-overruns `timeout_s` (the worker is then killed with SIGKILL, which a plugin cannot
-ignore), that check fails naming the cause and a fresh worker goes on with the next one.
+`generator_checks`, `sampler_checks`, `metric_checks`, `harness_checks`, `dataset_checks`:
+the plugin is never imported by the command itself); the checks run in order in one
+spawned worker, which keeps the kit's context (the fitted model) from one check to the
+next. When the worker dies or a check overruns `timeout_s` (the worker is then killed
+with SIGKILL, which a plugin cannot ignore), that check fails naming the cause and a
+fresh worker goes on with the next one.
 
 The worker is started as the benchmark's cell workers are (`brdfbench.pipeline.worker`):
 `spawn`, the caller's environment variables, working folder and in-process plugin
@@ -32,7 +33,7 @@ from .kit import DEFAULT_PAIRS, Check, ConformanceReport
 
 #: Seconds a check may run by default (`brdfbench check --timeout`).
 DEFAULT_TIMEOUT_S = 600.0
-KINDS = ("representation", "generator", "sampler")
+KINDS = ("representation", "generator", "sampler", "metric", "harness", "dataset")
 
 
 def _checks(kind: str, name: str, n_pairs: int, full: bool) -> tuple[list[Check], dict]:
@@ -46,6 +47,18 @@ def _checks(kind: str, name: str, n_pairs: int, full: bool) -> tuple[list[Check]
         from .samplers import _resolve as _sampler, sampler_checks
 
         return sampler_checks(_sampler(name), sweep="full" if full else "quick", n_pairs=n_pairs), {}
+    if kind == "metric":
+        from .metrics import metric_checks
+
+        return metric_checks(name, full=full), {}
+    if kind == "harness":
+        from .harnesses import harness_checks
+
+        return harness_checks(name, full=full), {}
+    if kind == "dataset":
+        from .datasets import dataset_checks
+
+        return dataset_checks(name, full=full), {}
     from .kit import _resolve, check_params, representation_checks
 
     spec = _resolve(name)
@@ -55,7 +68,7 @@ def _checks(kind: str, name: str, n_pairs: int, full: bool) -> tuple[list[Check]
 def check_isolated(kind: str, name: str, *, n_pairs: int = DEFAULT_PAIRS, full: bool = False,
                    timeout_s: float = DEFAULT_TIMEOUT_S,
                    on_result: Callable[[str, str, float], None] | None = None) -> ConformanceReport:
-    """Run the kit on representation, generator or sampler `name`, each check in a worker process
+    """Run the kit on plugin `name` of `kind` (one of KINDS), each check in a worker process
     limited to `timeout_s`; a check the worker died or overran in is "failed" (or
     "xfailed", if declared) with the cause. `on_result(check, outcome, seconds)` is called
     as each check ends. The plugin is imported in the workers only: one that crashes on

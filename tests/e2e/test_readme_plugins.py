@@ -32,7 +32,7 @@ PLUGINS = {
     "dataset": ("datasets", "my_diffuse"),
     "sampler": ("samplers", "my_uniform"),
 }
-KITS = ("representation", "generator", "metric", "sampler")
+KITS = ("representation", "generator", "metric", "harness", "dataset", "sampler")
 EXPECTED = {**{p: "python" for p in PLUGINS}, **{f"{p}.toml": "toml" for p in PLUGINS},
             **{f"{p}.kit": "python" for p in KITS}}
 MARK = re.compile(r"^<!-- readme-test: (?P<name>[\w.-]+) -->\n", re.M)
@@ -189,8 +189,9 @@ def test_metric_passes_the_kit_and_scores_in_the_accuracy_harness(install):
     assert bb.evaluate(lambert_fit(red), red, metrics=["my_rel_l1"], cost=False)["my_rel_l1"] < 1e-6
 
 
-def test_dataset_loads_and_its_materials_fit(install):
+def test_dataset_passes_the_kit_loads_and_its_materials_fit(install):
     install("dataset")
+    run_kit("dataset")
     data = bb.datasets("my_diffuse", scale=0.5)
     assert data.materials == ("grey-diffuse", "red-diffuse") and len(data) == 2
     assert data.fingerprint != bb.datasets("my_diffuse").fingerprint  # other data, another fingerprint
@@ -204,12 +205,14 @@ def test_dataset_loads_and_its_materials_fit(install):
         bb.datasets("my_diffuse", size="small")  # the README's claim: the default dataset's keys are refused
 
 
-def test_harness_checks_its_config_and_measures_through_the_pipeline(install, tmp_path):
+def test_harness_passes_the_kit_and_measures_through_the_pipeline(install, tmp_path):
     from brdfbench.harness import HarnessContext
-    from brdfbench.runner import RunConfig, harness_config, run
+    from brdfbench.pipeline.config import RunConfig, harness_config
+    from brdfbench.pipeline.sweep import run_job as run
     from brdfbench.store import ResultsStore
 
     install("harness", "dataset")
+    run_kit("harness")
     with pytest.raises(ConfigError, match="harness.n_dirs=0 must be ≥ 1"):
         harness_config("my_albedo", n_dirs=0)
     with pytest.raises(ConfigError, match="unknown config key harness.n_random"):

@@ -29,7 +29,7 @@ def test_conformance(check):
 
 @pytest.mark.parametrize("name", registry.names("metrics"))
 def test_metric_conformance(name):
-    check_metric(name)
+    check_metric(name).raise_on_failure()
 
 
 def test_adversarial_pairs_cover_every_family_and_hard_case():

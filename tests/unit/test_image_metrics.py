@@ -229,7 +229,7 @@ def test_harness_configs_name_metrics_of_their_kind():
     """Accuracy harnesses evaluate on BRDF values (no image metric); the render harness on images only."""
     from omegaconf import OmegaConf
 
-    from brdfbench.runner import harness_config
+    from brdfbench.pipeline.config import harness_config
 
     by_kind: dict[str, set[str]] = {"accuracy": set(harness_config().metrics)}
     for path in (REPO / "conf" / "harness").glob("*.yaml"):

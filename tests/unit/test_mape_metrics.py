@@ -89,4 +89,4 @@ def test_streaming_mape_is_the_mean_over_images(name, cls, space):
 
 @pytest.mark.parametrize("name", ["mape_ldr", "mape_hdr"])
 def test_the_metric_kit_passes(name):
-    check_metric(name)
+    check_metric(name).raise_on_failure()
