@@ -12,11 +12,11 @@ from .store_protocol import open_store
 
 def write_reports(results_dir: Path, store: str = "sqlite", store_params: dict[str, Any] | None = None) -> list[Path]:
     """Regenerate every report of `results_dir` from its store (which must exist already);
-    returns the paths written, the Markdown leaderboard first where it is registered."""
+    returns the paths written, those of the report of lowest `order` first (the leaderboard)."""
     opened = open_store(store, results_dir, {**(store_params or {}), "create": False})
     df = opened.frame()
-    names = sorted(registry.names("reports"), key=lambda n: (n != "markdown", n))
+    specs = sorted(registry.all_specs("reports"), key=lambda spec: (spec.order, spec.name))
     paths: list[Path] = []
-    for name in names:
-        paths += registry.get("reports", name).load()(df, Path(results_dir), opened.location)
+    for spec in specs:
+        paths += spec.load()(df, Path(results_dir), opened.location)
     return paths

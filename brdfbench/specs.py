@@ -54,6 +54,10 @@ class RepresentationSpec(PluginSpec):
     #: a table read back cell by cell): reports show such a configuration apart, never ranked;
     #: a key a configuration leaves out takes the value given here. None: never the target.
     reference: Mapping[str, Any] | None = None
+    #: the input encoding ("rusinkiewicz", "directions": `brdfbench.nbrdf.network.FEATURES`)
+    #: of the NBRDF-layout networks this representation fits and saves: NBRDF weight files
+    #: and datasets of fitted networks find their representation by it, never by name.
+    network_features: str = ""
 
     def create(self, **params: Any):
         return self.load()(**params)
@@ -115,6 +119,10 @@ class HarnessSpec(PluginSpec):
 @dataclass(frozen=True)
 class ReportSpec(PluginSpec):
     """A report; `target` is a callable (results frame, results folder, store name) -> paths written."""
+
+    #: reports are written lowest `order` first (then by name); the first path of the first
+    #: report is the one the CLI prints as the leaderboard
+    order: int = 100
 
 
 @dataclass(frozen=True)

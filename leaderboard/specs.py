@@ -8,6 +8,7 @@ MARKDOWN = ReportSpec(
     name="markdown",
     description="leaderboard.md: accuracy beside its cost per dataset and scene, failures, convergence figures (PNG)",
     target="brdfbench_leaderboard.report:markdown_report",
+    order=0,  # the leaderboard the CLI names
 )
 
 HTML = ReportSpec(
@@ -15,4 +16,5 @@ HTML = ReportSpec(
     description="leaderboard.html: one self-contained page: sortable tables with intervals, accuracy-against-cost "
                 "plots, convergence figures, the source papers' published figures beside ours",
     target="brdfbench_leaderboard.html:html_report",
+    order=10,
 )

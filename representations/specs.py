@@ -48,6 +48,7 @@ NBRDF = RepresentationSpec(
     target="brdfbench_representations.nbrdf:NBRDF",
     tags=frozenset({"isotropic", "fittable", "neural"}),
     check_params={"epochs": 2, "n_samples": 100_000},  # the kit's quick run: a short fit
+    network_features="rusinkiewicz",
 )
 NAIVE_MLP = RepresentationSpec(
     name="naive_mlp",
@@ -55,6 +56,7 @@ NAIVE_MLP = RepresentationSpec(
     target="brdfbench_representations.nbrdf:NaiveMLP",
     tags=frozenset({"fittable", "neural"}),
     check_params={"epochs": 2, "n_samples": 100_000},  # the kit's quick run: a short fit
+    network_features="directions",
 )
 TRIPLEPLANE = RepresentationSpec(
     name="tripleplane",

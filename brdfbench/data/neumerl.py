@@ -47,7 +47,7 @@ import torch
 from .. import registry
 from ..errors import ConfigError, DataError, ModelFileError
 from ..generator_protocol import WeightSet
-from ..nbrdf.formats import read_network, write_network
+from ..nbrdf.formats import read_network, representation_for, write_network
 from ..nbrdf.layouts import flatten
 from ..nbrdf.network import Network
 from . import Dataset
@@ -59,8 +59,10 @@ log = logging.getLogger(__name__)
 
 #: Bump when the fitting procedure changes: it is in the fingerprint and the cache key.
 VERSION = "v1"
-FITTER = "nbrdf"
-#: The fitting recipe: the `nbrdf` defaults (minibatch 2048, lr 2e-2, one-cycle) with 10
+#: The input encoding of the networks fitted: their representation is the one registered
+#: for it (`brdfbench.nbrdf.formats.representation_for`).
+FEATURES = "rusinkiewicz"
+#: The fitting recipe: that representation's (NBRDF's) defaults (minibatch 2048, lr 2e-2, one-cycle) with 10
 #: epochs over 150k drawn pairs instead of 15 over 800k, 8x fewer sample passes: every
 #: material but the anchor starts from a fitted network.
 DEFAULT_EPOCHS = 10
@@ -121,13 +123,15 @@ class NeumerlWeights:
         self.fit_seed = fit_seed
         self.device = device
         self.anchor = tables.splits["train"][0]
-        spec = registry.get("representations", FITTER)
+        self.fitter_name = representation_for(FEATURES)
+        spec = registry.get("representations", self.fitter_name)
         probe = spec.create(**params, **FIXED)  # a bad value fails now, naming it; its params fill in the defaults
         if device.type != "cpu":  # the fitter batches more materials at once on a GPU
             self.batch_materials = max(batch_materials, probe.to(device).fit_batch_size)
         #: What a fitted vector depends on: the fitter, its full recipe and the sample seed (not
         #: `batch_materials`: results do not depend on batch-mates).
-        self.recipe = {"fitter": FITTER, "version": registry.version("representations", FITTER), "fit_seed": fit_seed,
+        self.recipe = {"fitter": self.fitter_name, "version": registry.version("representations", self.fitter_name),
+                       "fit_seed": fit_seed,
                        **{k: v for k, v in probe.params.items() if k not in ("init", "batch_materials")}}
         keyed = [VERSION, tables.fingerprint, self.recipe, self.anchor]
         if device.type != "cpu":  # a GPU's fits are cached apart from the CPU's (see the module docstring)
@@ -184,8 +188,8 @@ class NeumerlWeights:
 
     # -- fitting -------------------------------------------------------------------------
     def _fitter(self, init: str):
-        fitter = registry.get("representations", FITTER).create(**self.params, **FIXED, init=init,
-                                                                 batch_materials=max(2, self.batch_materials))
+        fitter = registry.get("representations", self.fitter_name).create(
+            **self.params, **FIXED, init=init, batch_materials=max(2, self.batch_materials))
         return fitter if self.device.type == "cpu" else fitter.to(self.device)
 
     def _fit(self, names: Sequence[str], init: str) -> list[tuple[dict[str, torch.Tensor], dict[str, Any]]]:

@@ -12,12 +12,13 @@ through shared directions; each rung is a separate render. With per-sample varia
 the expected squared error at n spp is σ²(1/n + 1/N) for an N-spp reference: at the
 default top rung the reference adds 1/16 of the rung's own noise.
 
-Per rung the harness records the RMSE, MAE, MAPE and PSNR of HDR radiance (the four
-panels of Sztrajman et al.'s convergence figures), the relative MSE and the render time
-(so error against time is available); over the rungs, the least-squares slope of
-log RMSE against log spp (−½ for an unbiased estimator of finite variance; flatter when
-rare fireflies dominate, since a few spp seldom catch them) and the RMSE at 1 spp implied
-by the 1/√spp law fitted to all rungs, a one-number efficiency of the sampler.
+Per rung the harness records the image metrics of `harness.metrics` (as shipped: the RMSE,
+MAE, MAPE and PSNR of HDR radiance, the four panels of Sztrajman et al.'s convergence
+figures), the relative MSE and the render time (so error against time is available); over
+the rungs, the least-squares slope of the first metric's log (log RMSE) against log spp
+(−½ for an unbiased estimator of finite variance; flatter when rare fireflies dominate,
+since a few spp seldom catch them) and its value at 1 spp implied by the 1/√spp law
+fitted to all rungs, a one-number efficiency of the sampler.
 """
 
 from __future__ import annotations
@@ -35,13 +36,12 @@ import torch
 from ..errors import ConfigError
 from ..protocol import Material, Representation
 from ..provenance import config_hash
+from ..specs import MetricSpec
 from . import Harness, HarnessContext, Measurement
 from .render import MONTE_CARLO, RenderConfig, cached_render, check_simulation
 
 #: ε of the relative MSE (p − r)² / (r² + ε), as in denoising work (Rousselle et al. 2011).
 RELMSE_EPS = 1e-2
-#: The registered image metrics measured at every rung, in HDR radiance.
-RUNG_METRICS = ("rmse_hdr", "mae_hdr", "mape_hdr", "psnr_hdr")
 
 
 # --------------------------------------------------------------------------- configuration
@@ -65,10 +65,9 @@ def check_ladder(ladder: Any, reference_spp: Any) -> tuple[int, ...]:
 
 def check_config(harness, scene) -> None:
     """Up-front checks of a convergence harness on `scene` (before any fitting)."""
-    if harness.metrics:
-        raise ConfigError(f"harness.metrics={list(harness.metrics)!r} must be empty for harness=convergence: it "
-                          f"always measures {', '.join(RUNG_METRICS)}, relmse_hdr and render_time at each spp of "
-                          "harness.spp_ladder")
+    if not harness.metrics:
+        raise ConfigError("harness.metrics=[] must name at least one image metric for harness=convergence: each is "
+                          "measured at every spp of harness.spp_ladder, and the first one's slope is fitted")
     if harness.spp is not None:
         raise ConfigError(f"harness.spp={harness.spp!r} must be null for harness=convergence: "
                           "harness.spp_ladder and harness.reference_spp set the samples per pixel")
@@ -96,20 +95,11 @@ def derive_seed(seed: int, tag: str) -> int:
 # --------------------------------------------------------------------------- errors and the fit
 
 
-def image_metric(name: str, image: torch.Tensor, reference: torch.Tensor) -> Measurement:
-    """One registered image metric of `image` against `reference`, with the spec's unit and
-    direction (the core names no metric module)."""
-    from .. import registry
-
-    spec = registry.get("metrics", name)
+def image_metric(spec: MetricSpec, image: torch.Tensor, reference: torch.Tensor) -> Measurement:
+    """One registered image metric of `image` against `reference`, with the spec's unit and direction."""
     metric = spec.load()()
     metric.update(image, reference)
-    return Measurement(name, float(metric.compute()), spec.unit, spec.higher_is_better)
-
-
-def rmse_hdr(image: torch.Tensor, reference: torch.Tensor) -> float:
-    """RMSE of HDR radiance, by the registered `rmse_hdr` metric."""
-    return image_metric("rmse_hdr", image, reference).value
+    return Measurement(spec.name, float(metric.compute()), spec.unit, spec.higher_is_better)
 
 
 def relative_mse(image: torch.Tensor, reference: torch.Tensor, eps: float = RELMSE_EPS) -> float:
@@ -164,9 +154,13 @@ class ConvergenceHarness:
     the kernels of that spp, first-call caches) and reflects the cost of the samples.
     """
 
-    def __init__(self, build: Callable[[int], Any], ladder: Sequence[int], reference_spp: int, *, out_dir: Path,
-                 dataset_fingerprint: str, seed: int = 0, exposure: float = 0.0, save_images: bool = True,
-                 key: dict[str, Any] | None = None):
+    def __init__(self, build: Callable[[int], Any], ladder: Sequence[int], reference_spp: int, *,
+                 metrics: Sequence[MetricSpec], out_dir: Path, dataset_fingerprint: str, seed: int = 0,
+                 exposure: float = 0.0, save_images: bool = True, key: dict[str, Any] | None = None):
+        """`metrics`: the image metrics measured at every rung; the first one's slope is fitted."""
+        if not metrics:
+            raise ConfigError("harness=convergence needs at least one image metric (harness.metrics)")
+        self.metrics = tuple(metrics)
         self.ladder = check_ladder(ladder, reference_spp)
         self.reference_spp = reference_spp
         self.reference_simulator = build(reference_spp)
@@ -192,7 +186,8 @@ class ConvergenceHarness:
         )
 
     def measure(self, model: Representation, material: Material, label: str) -> list[Measurement]:
-        """Per rung: RUNG_METRICS, relmse_hdr, render_time; then convergence_slope and convergence_rmse_1spp."""
+        """Per rung: each metric, relmse_hdr and render_time; then, of the first metric,
+        convergence_slope and convergence_rmse_1spp (its value at 1 spp under the 1/√spp law)."""
         reference = self.reference(model, material, label)
         out, errors = [], []
         for n, simulator in self.rungs.items():
@@ -201,10 +196,16 @@ class ConvergenceHarness:
             t0 = time.perf_counter()
             image = simulator.render(model, seed=derive_seed(self.seed, f"spp={n}"), **who)
             seconds = time.perf_counter() - t0
-            black = not bool((reference > 0).any())  # PSNR has no HDR data range then
-            rung = [image_metric(name, image, reference) for name in RUNG_METRICS
-                    if not (black and name == "psnr_hdr")]
-            errors.append(rung[0].value)
+            black = not bool((reference > 0).any())
+            rung = []
+            for spec in self.metrics:
+                try:
+                    rung.append(image_metric(spec, image, reference))
+                except ValueError:  # a metric relative to the reference's range (HDR PSNR) has none
+                    if not black:
+                        raise
+            first = self.metrics[0].name
+            errors.append(rung[0].value if rung and rung[0].metric == first else math.nan)
             out += [Measurement(m.metric, m.value, m.unit, m.higher_is_better, spp=n) for m in rung]
             out += [
                 Measurement("relmse_hdr", relative_mse(image, reference), "1", False, spp=n),
@@ -213,7 +214,7 @@ class ConvergenceHarness:
         slope, at_one = fit_slope(self.ladder, errors)
         if math.isfinite(slope):
             out += [Measurement("convergence_slope", slope, "1", False),
-                    Measurement("convergence_rmse_1spp", at_one, "radiance", False)]
+                    Measurement("convergence_rmse_1spp", at_one, self.metrics[0].unit, self.metrics[0].higher_is_better)]
         return out
 
 
@@ -223,7 +224,7 @@ class ConvergenceHarness:
 @dataclass(frozen=True)
 class ConvergenceConfig(RenderConfig):
     kind: str = "convergence"
-    metrics: tuple[str, ...] = ()  # must stay empty: the per-rung errors are fixed
+    metrics: tuple[str, ...] = ()  # measured per rung, the first one's slope fitted (the shipped option lists them)
     spp_ladder: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)  # spp of the rungs, strictly increasing
     reference_spp: int = 1024  # spp of the model's own reference render; above the ladder
 
@@ -233,12 +234,12 @@ class ConvergenceHarnessPlugin(Harness):
 
     name = "convergence"
     Config = ConvergenceConfig
+    domains = ("image",)
     rendered = True
 
     @classmethod
     def validate(cls, config, scene, metric_specs) -> None:
-        if not scene.needs_rendering:
-            super().validate(config, scene, metric_specs)
+        super().validate(config, scene, metric_specs)
         check_config(config, scene)
         check_simulation(config, scene)
 
@@ -257,7 +258,7 @@ class ConvergenceHarnessPlugin(Harness):
                                    spp=spp, dtype=getattr(torch, c.dtype), backend=c.backend)
 
         self.harness = ConvergenceHarness(
-            build, c.spp_ladder, c.reference_spp,
+            build, c.spp_ladder, c.reference_spp, metrics=context.metric_specs,
             out_dir=context.results_dir / "renders" / context.scene.name / "convergence",
             dataset_fingerprint=context.dataset_fingerprint, seed=context.seed, exposure=c.exposure,
             save_images=c.save_images,

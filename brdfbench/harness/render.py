@@ -233,7 +233,7 @@ MONTE_CARLO = ("direct_mis", "path")
 @dataclass(frozen=True)
 class RenderConfig(HarnessConfig):
     kind: str = "render"
-    metrics: tuple[str, ...] = ("psnr_ldr", "ssim_ldr", "flip_ldr", "rmse_ldr", "mae_ldr", "rmse_hdr", "mae_hdr")
+    metrics: tuple[str, ...] = ()  # the shipped harness=render option lists the default metrics
     timeout_s: float | None = field(default=1800.0, metadata={"min_exclusive": 0})
     simulator: str | None = None  # None: the cheapest exact one for the scene
     backend: str | None = field(default=None, metadata={"choices": ("mitsuba", "torch")})  # None: mitsuba where LLVM >= 19 loads

@@ -13,7 +13,7 @@ with weights_only=True, safetensors by its header. Vectors and state dicts carry
 units: `raw_units=True` says the network outputs raw (unscaled) MERL values, which the
 model multiplies by the MERL channel scales; the release's networks output 1/sr.
 
-A model file is written by the representation its encoding belongs to (`REPRESENTATIONS`),
+A model file is written by the representation its encoding belongs to (`representation_for`),
 found through the registry like any plugin; it records only what is true of a converted
 network: its architecture, encoding, units and source file, no training parameters.
 """
@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from .. import modelio, registry
-from ..errors import DataError, ModelFileError
+from ..errors import DataError, ModelFileError, PluginError
 from .keras_h5 import read_nbrdf_h5
 from .layouts import check_finite, check_hidden, flatten, from_torch_state, to_torch_state, unflatten
 from .network import FEATURES, PUBLISHED_HIDDEN, Network
@@ -40,8 +40,26 @@ TORCH_SUFFIXES = (".pt", ".pth")
 MODEL_SUFFIXES = (".safetensors",)
 READABLE = H5_SUFFIXES + VECTOR_SUFFIXES + TORCH_SUFFIXES + MODEL_SUFFIXES
 WRITABLE = VECTOR_SUFFIXES + TORCH_SUFFIXES + MODEL_SUFFIXES
-#: The registered representation that saves a network of each input encoding.
-REPRESENTATIONS = {"rusinkiewicz": "nbrdf", "directions": "naive_mlp"}
+
+
+def representation_for(features: str) -> str:
+    """The registered representation that fits and saves networks of this input encoding:
+    the one whose spec declares it as `network_features` (a plugin that fails to load is
+    passed over); a PluginError where none or several do."""
+    check_features(features)
+    found = []
+    for name in registry.names("representations"):
+        try:
+            spec = registry.get("representations", name)
+        except PluginError:
+            continue
+        if getattr(spec, "network_features", "") == features:
+            found.append(name)
+    if len(found) != 1:
+        which = f"{len(found)} do ({', '.join(found)})" if found else "none does"
+        raise PluginError(f"networks of input encoding {features!r} need one registered representation whose spec "
+                          f"declares network_features={features!r}; {which}")
+    return found[0]
 
 
 def check_features(features: str) -> str:
@@ -140,8 +158,8 @@ def _read_model(path: Path) -> Network:
 
 def to_model(network: Network):
     """A fitted model holding these weights, of the representation registered for the
-    network's encoding (`REPRESENTATIONS`), made by its `from_network`."""
-    name = REPRESENTATIONS[check_features(network.features)]
+    network's encoding (`representation_for`), made by its `from_network`."""
+    name = representation_for(network.features)
     return registry.get("representations", name).load().from_network(network)
 
 
@@ -155,7 +173,7 @@ def write_network(network: Network, path: str | os.PathLike) -> Path:
     if suffix in MODEL_SUFFIXES:
         model = to_model(network)  # before any directory is made: an unknown encoding writes nothing
         path.parent.mkdir(parents=True, exist_ok=True)
-        return modelio.save(model, REPRESENTATIONS[network.features], path)
+        return modelio.save(model, representation_for(network.features), path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with replacing(path) as tmp:
         if suffix in VECTOR_SUFFIXES:

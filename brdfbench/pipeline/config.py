@@ -17,6 +17,7 @@ from .. import registry
 from ..device import check_spec
 from ..errors import ConfigError
 from ..harness import HarnessConfig, check_value
+from .harness_defaults import shipped_defaults
 
 PROGRESS = ("auto", "bar", "lines", "none")
 
@@ -32,8 +33,10 @@ def harness_class(kind: str):
 
 
 def harness_config(kind: str = "accuracy", **values: Any) -> HarnessConfig:
-    """The typed config of harness `kind` from its keys (unknown keys and bad values named)."""
-    return harness_class(kind).Config.from_dict({"kind": kind, **values})
+    """The typed config of harness `kind` from its keys (unknown keys and bad values named);
+    keys not given take the shipped option's values (`harness_defaults`), then the Config's."""
+    cls = harness_class(kind)
+    return cls.Config.from_dict({**shipped_defaults(kind), **values, "kind": kind})
 
 
 def _default_harness() -> HarnessConfig:

@@ -360,6 +360,9 @@ def adapter_class() -> type:
 
 
 PLUGIN_PREFIX = "brdfbench_"
+#: The plugin of a live model whose class is no registered representation (the render
+#: harness's table reference): reached through `model_id` only.
+UNREGISTERED = PLUGIN_PREFIX + "model"
 
 
 def plugin_name(rep_name: str) -> str:
@@ -385,6 +388,9 @@ def register_plugins() -> list[str]:
                               f"shadow it: its BSDF is registered as {plugin!r}", stacklevel=2)
             mi.register_bsdf(plugin, lambda props, name=name: _construct(cls, props, name))
             _REGISTERED.add((variant, name))
+    if (variant, UNREGISTERED) not in _REGISTERED:
+        mi.register_bsdf(UNREGISTERED, lambda props: _construct(cls, props, UNREGISTERED))
+        _REGISTERED.add((variant, UNREGISTERED))
     return names
 
 

@@ -121,13 +121,14 @@ class MitsubaSimulator(Simulator):
 
     @staticmethod
     def _plugin_name(model: Representation, mitsuba_bsdf) -> str:
-        """The registered name of the model's class (error messages use it); "merl" for a
-        model of no registered class, such as the harness's table reference."""
+        """The registered name of the model's class (error messages use it); the adapter's
+        own `UNREGISTERED` plugin for a model of no registered class, such as the harness's
+        table reference."""
         from .. import registry
 
         names = mitsuba_bsdf.register_plugins()
         if type(model) not in _PLUGIN_NAMES:
-            found = "merl"
+            found = mitsuba_bsdf.UNREGISTERED
             for name in names:
                 try:
                     if registry.get("representations", name).load() is type(model):

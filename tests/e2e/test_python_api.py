@@ -40,7 +40,8 @@ def model(material):
 @pytest.fixture(scope="module")
 def results_folder(tmp_path_factory, synthetic_cache):
     """A working folder whose `results/` holds a store, as `brdfbench` writes it (in-process)."""
-    from brdfbench.runner import RunConfig, harness_config, run
+    from brdfbench.pipeline.config import RunConfig, harness_config
+    from brdfbench.pipeline.sweep import run_job as run
 
     cwd = tmp_path_factory.mktemp("notebook")
     run(RunConfig(representation="lambert", representation_params={}, label="lambert", dataset="synthetic",
@@ -129,10 +130,11 @@ def test_representation_is_the_plugin_unfitted_with_its_params():
 def test_evaluate_scores_as_the_accuracy_harness(model, material):
     from brdfbench import registry
     from brdfbench.harness.accuracy import evaluate_accuracy
-    from brdfbench.harness.accuracy_harness import AccuracyConfig
+    from brdfbench.pipeline.config import harness_config
 
     scores = bb.evaluate(model, material, **QUICK)
-    defaults = AccuracyConfig().metrics
+    defaults = harness_config("accuracy").metrics
+    assert defaults, "the shipped harness=accuracy option names the default metrics"
     assert list(scores)[:len(defaults)] == list(defaults)
     assert {"evals_per_s", "model_bytes"} <= set(scores)
     direct = evaluate_accuracy(model, material, [registry.get("metrics", m) for m in defaults], n_random=4096)

@@ -10,12 +10,13 @@ import pandas as pd
 import pytest
 import torch
 
-from brdfbench import mitsuba_env, scenes
+from brdfbench import mitsuba_env, registry, scenes
 from brdfbench.errors import ConfigError
 from brdfbench.harness.convergence import ConvergenceHarness, derive_seed, fit_slope, sampler_label
 from brdfbench.render.simulate import build_simulator
 from brdfbench.report import write_reports
-from brdfbench.runner import RunConfig, harness_config, run
+from brdfbench.pipeline.config import RunConfig, harness_config
+from brdfbench.pipeline.sweep import run_job as run
 from brdfbench.store import ResultsStore
 from brdfbench_leaderboard import markdown
 from brdfbench_representations.analytic import GGX
@@ -32,8 +33,13 @@ def _harness(tmp_path, sampler="cosine", params=None, *, backend="torch", ladder
     scene = scenes.sphere_envmap(width=width, height=width)
     build = lambda spp: build_simulator(scene, sampler=sampler, sampler_params=params, spp=spp,  # noqa: E731
                                         backend=backend)
-    return ConvergenceHarness(build, ladder, reference_spp, out_dir=tmp_path, dataset_fingerprint="test",
-                              save_images=False)
+    return ConvergenceHarness(build, ladder, reference_spp, metrics=_rung_metrics(), out_dir=tmp_path,
+                              dataset_fingerprint="test", save_images=False)
+
+
+def _rung_metrics():
+    """The shipped option's per-rung metrics, as specs."""
+    return [registry.get("metrics", name) for name in harness_config("convergence").metrics]
 
 
 def _lambert() -> Lambert:
@@ -109,8 +115,9 @@ def test_the_mitsuba_backend_takes_the_derived_seeds(tmp_path):
 @pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="drjit does not load LLVM >= 19 here")
 def test_the_path_traced_scene_converges_too(tmp_path):
     scene = scenes.spheres_on_plane(width=16, height=12)
-    harness = ConvergenceHarness(lambda spp: build_simulator(scene, spp=spp), (1, 4, 16), 128, out_dir=tmp_path,
-                                 dataset_fingerprint="test", save_images=False)
+    harness = ConvergenceHarness(lambda spp: build_simulator(scene, spp=spp), (1, 4, 16), 128,
+                                 metrics=_rung_metrics(), out_dir=tmp_path, dataset_fingerprint="test",
+                                 save_images=False)
     assert {s.name for s in harness.rungs.values()} == {"path"}
     got = _values(harness.measure(_lambert(), MATERIAL, "lambert"))
     assert got["rmse_hdr@spp=16"] < got["rmse_hdr@spp=1"] and -0.8 < got["convergence_slope"] < -0.2
@@ -120,7 +127,7 @@ def test_the_path_traced_scene_converges_too(tmp_path):
 
 
 def _convergence(**kw) -> object:
-    fields = {"metrics": (), "backend": "torch", "spp_ladder": (1, 2, 4, 8), "reference_spp": 64, **kw}
+    fields = {"backend": "torch", "spp_ladder": (1, 2, 4, 8), "reference_spp": 64, **kw}
     return harness_config(kind="convergence", **fields)
 
 
@@ -183,7 +190,8 @@ def test_sampler_parameters_are_part_of_the_sampler_label():
     (_convergence(reference_spp=8), "sphere_envmap", "harness.reference_spp=8 must be an integer above .* 8"),
     (_convergence(), "sphere_directional", "scene='sphere_directional' renders with harness.simulator='closed_form'"),
     (_convergence(), "brdf_space", "harness=convergence needs a rendered scene"),
-    (_convergence(metrics=("rmse_hdr",)), "sphere_envmap", "harness.metrics=.* must be empty"),
+    (_convergence(metrics=()), "sphere_envmap", r"harness.metrics=\[\] must name at least one image metric"),
+    (_convergence(metrics=("l1",)), "sphere_envmap", "harness.metrics: 'l1' is measured on 'merl_grid'"),
     (_convergence(spp=16), "sphere_envmap", "harness.spp=16 must be null"),
 ])
 def test_bad_convergence_config_names_the_key_before_any_work(tmp_path, synthetic_cache, harness, scene, match):
@@ -203,7 +211,7 @@ def test_the_packaged_config_composes_with_sampler_parameters():
         ggx = to_run_config(compose("config", overrides=[*base, "harness.sampler=ggx",
                                                          "harness.sampler_params.alpha=0.2"]))
         uniform = to_run_config(compose("config", overrides=[*base, "harness.sampler=uniform"]))
-    assert ggx.harness.kind == "convergence" and ggx.harness.metrics == ()
+    assert ggx.harness.kind == "convergence" and ggx.harness.metrics == ("rmse_hdr", "mae_hdr", "mape_hdr", "psnr_hdr")
     assert ggx.harness.sampler_params == {"alpha": 0.2} and uniform.harness.sampler_params == {}
     assert tuple(ggx.harness.spp_ladder) == LADDER and ggx.harness.reference_spp == 1024
 

@@ -107,15 +107,17 @@ def test_streaming_mae_is_the_mean_over_images_in_any_chunks(name, cls, space, u
 
 @pytest.mark.parametrize("name", ["mae_ldr", "mae_hdr"])
 def test_the_metric_kit_passes(name):
-    check_metric(name)
+    check_metric(name).raise_on_failure()
 
 
 def test_the_render_harness_computes_mae_wherever_it_computes_rmse():
     from omegaconf import OmegaConf
 
-    from brdfbench.harness.render import RenderConfig
+    from brdfbench.pipeline.config import harness_config
 
-    for metrics in (RenderConfig().metrics, OmegaConf.load(REPO / "conf" / "harness" / "render.yaml").metrics):
+    metrics = harness_config("render").metrics
+    assert metrics and list(metrics) == list(OmegaConf.load(REPO / "conf" / "harness" / "render.yaml").metrics)
+    for metrics in (metrics,):
         for space in IF.SPACES:
             if f"rmse_{space}" in metrics:
                 assert f"mae_{space}" in metrics, metrics

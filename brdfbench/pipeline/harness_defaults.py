@@ -1,0 +1,96 @@
+"""A harness kind's shipped defaults, read from the Hydra config group without composing it.
+
+`harness_config(kind)` (the Python API, a `RunConfig`'s default, tests) starts from the same
+values as `brdfbench harness=<kind>`, so that defaults such as the metrics a harness scores
+are written once, in the configuration, and the core names no metric. The option read is
+`harness/<kind>.yaml` of brdfbench's config package, else of the first package of a
+`brdfbench.conf` entry point that has it (the search path's order; see
+`hydra_plugins/brdfbench_searchpath`). Its defaults list may name other options of the
+group (merged first, or where `_self_` says); an option `# @package _global_` gives its
+`harness` mapping. A kind with no option takes its Config dataclass's defaults.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from functools import lru_cache
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ..errors import ConfigError
+
+PRIMARY = "brdfbench_conf"
+GROUP = "harness"
+
+
+def _package_dir(package: str) -> Path | None:
+    try:
+        spec = importlib.util.find_spec(package)
+    except (ImportError, ValueError):
+        return None
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    return Path(next(iter(spec.submodule_search_locations)))
+
+
+def _config_dirs() -> list[Path]:
+    """The `harness/` folders of the config packages, in the search path's order."""
+    packages = [PRIMARY] + sorted({ep.value.split(":", 1)[0].strip()
+                                   for ep in entry_points(group="brdfbench.conf")} - {PRIMARY})
+    dirs = [_package_dir(p) for p in packages]
+    return [d / GROUP for d in dirs if d is not None and (d / GROUP).is_dir()]
+
+
+def _find(option: str) -> Path | None:
+    return next((d / f"{option}.yaml" for d in _config_dirs() if (d / f"{option}.yaml").is_file()), None)
+
+
+def _read(path: Path, seen: tuple[str, ...]) -> dict[str, Any]:
+    text = path.read_text(encoding="utf-8")
+    try:
+        data = yaml.safe_load(text) or {}
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path}: not valid YAML ({str(e).splitlines()[0]})") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: a harness option must be a mapping, not {type(data).__name__}")
+    defaults = data.pop("defaults", [])
+    if any(line.strip() == "# @package _global_" for line in text.splitlines()[:5]):
+        data = data.get(GROUP) or {}
+    merged: dict[str, Any] = {}
+    placed_self = False
+    for entry in defaults:
+        if entry == "_self_":
+            merged.update(data)
+            placed_self = True
+        elif isinstance(entry, str) and "/" not in entry and ":" not in entry:
+            if entry in seen:
+                raise ConfigError(f"{path}: harness option {entry!r} includes itself through its defaults list")
+            found = _find(entry)
+            if found is None:
+                raise ConfigError(f"{path}: defaults list names harness option {entry!r}, which is not shipped")
+            merged.update(_read(found, (*seen, entry)))
+        # entries for other groups (overrides of /dataset, …) set no harness key
+    if not placed_self:  # Hydra's default: the option's own keys after its defaults list
+        merged.update(data)
+    return merged
+
+
+@lru_cache(maxsize=None)
+def _shipped(kind: str) -> tuple[tuple[str, Any], ...]:
+    path = _find(kind)
+    if path is None:
+        return ()
+    return tuple(_read(path, (kind,)).items())
+
+
+def shipped_defaults(kind: str) -> dict[str, Any]:
+    """The keys and values `harness=<kind>` sets (without `kind`); {} where none is shipped.
+    A mapping's null entries are left out, as the CLI leaves them out: an option declares
+    such keys (e.g. `sampler_params.alpha: null`) to show them, not to pass them."""
+    values = dict(_shipped(kind))
+    values.pop("kind", None)
+    return {k: (list(v) if isinstance(v, list) else {a: b for a, b in v.items() if b is not None}
+                if isinstance(v, dict) else v) for k, v in values.items()}
