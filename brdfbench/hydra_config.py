@@ -13,6 +13,7 @@ from omegaconf import DictConfig, OmegaConf
 from . import parallelism
 from .errors import ConfigError
 from .pipeline.config import RunConfig, harness_config
+from .pipeline.harness_defaults import unset_nulls
 
 JOB_SUMMARY = "brdfbench_job.json"
 #: Summaries of the jobs run in this process, so the end of the sweep has them even where a
@@ -80,8 +81,7 @@ def to_run_config(cfg: DictConfig, job: str = "") -> RunConfig:
         if extra:
             raise ConfigError(f"unknown config key(s) {', '.join(f'{key}.{k}' for k in extra)}; "
                               f"{key} takes {', '.join(sorted(allowed))}")
-    if isinstance(harness.get("sampler_params"), dict):  # a harness yaml may declare sampler keys as null: unset
-        harness["sampler_params"] = {k: v for k, v in harness["sampler_params"].items() if v is not None}
+    unset_nulls(harness)
     choices = _choices(cfg)
     materials = _value(cfg, "materials")
     if materials is not None and not isinstance(materials, (list, tuple)):

@@ -4,44 +4,28 @@
 values as `brdfbench harness=<kind>`, so that defaults such as the metrics a harness scores
 are written once, in the configuration, and the core names no metric. The option read is
 `harness/<kind>.yaml` of brdfbench's config package, else of the first package of a
-`brdfbench.conf` entry point that has it (the search path's order; see
-`hydra_plugins/brdfbench_searchpath`). Its defaults list may name other options of the
-group (merged first, or where `_self_` says); an option `# @package _global_` gives its
-`harness` mapping. A kind with no option takes its Config dataclass's defaults.
+`brdfbench.conf` entry point that has it (Hydra's search-path order: `conf_packages`). Its
+defaults list may name other options of the group (merged first, or where `_self_` says);
+an option `# @package _global_` gives its `harness` mapping. A kind with no option takes its Config dataclass's defaults.
 """
 
 from __future__ import annotations
 
-import importlib.util
 from functools import lru_cache
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from ..conf_packages import search_path
 from ..errors import ConfigError
 
-PRIMARY = "brdfbench_conf"
 GROUP = "harness"
-
-
-def _package_dir(package: str) -> Path | None:
-    try:
-        spec = importlib.util.find_spec(package)
-    except (ImportError, ValueError):
-        return None
-    if spec is None or not spec.submodule_search_locations:
-        return None
-    return Path(next(iter(spec.submodule_search_locations)))
 
 
 def _config_dirs() -> list[Path]:
     """The `harness/` folders of the config packages, in the search path's order."""
-    packages = [PRIMARY] + sorted({ep.value.split(":", 1)[0].strip()
-                                   for ep in entry_points(group="brdfbench.conf")} - {PRIMARY})
-    dirs = [_package_dir(p) for p in packages]
-    return [d / GROUP for d in dirs if d is not None and (d / GROUP).is_dir()]
+    return [d / GROUP for d in search_path() if (d / GROUP).is_dir()]
 
 
 def _find(option: str) -> Path | None:
@@ -86,11 +70,18 @@ def _shipped(kind: str) -> tuple[tuple[str, Any], ...]:
     return tuple(_read(path, (kind,)).items())
 
 
+def unset_nulls(harness: dict[str, Any]) -> dict[str, Any]:
+    """`harness` with the null entries of its `sampler_params` left out: an option declares
+    such keys (`sampler_params.alpha: null`) to show them, not to pass them. The CLI and
+    `shipped_defaults` both read options through this."""
+    if isinstance(harness.get("sampler_params"), dict):
+        harness["sampler_params"] = {k: v for k, v in harness["sampler_params"].items() if v is not None}
+    return harness
+
+
 def shipped_defaults(kind: str) -> dict[str, Any]:
-    """The keys and values `harness=<kind>` sets (without `kind`); {} where none is shipped.
-    A mapping's null entries are left out, as the CLI leaves them out: an option declares
-    such keys (e.g. `sampler_params.alpha: null`) to show them, not to pass them."""
-    values = dict(_shipped(kind))
-    values.pop("kind", None)
-    return {k: (list(v) if isinstance(v, list) else {a: b for a, b in v.items() if b is not None}
-                if isinstance(v, dict) else v) for k, v in values.items()}
+    """The keys and values `harness=<kind>` sets (without `kind`, nulls unset as the CLI
+    unsets them); {} where none is shipped."""
+    values = {k: (list(v) if isinstance(v, list) else dict(v) if isinstance(v, dict) else v)
+              for k, v in _shipped(kind) if k != "kind"}
+    return unset_nulls(values)

@@ -20,15 +20,15 @@ to another Hydra application installed in the same environment.
 
 from __future__ import annotations
 
-import importlib.util
 import sys
-from importlib.metadata import entry_points
 
 from hydra.core.config_search_path import ConfigSearchPath
 from hydra.plugins.search_path_plugin import SearchPathPlugin
 
-ENTRY_POINT_GROUP = "brdfbench.conf"
-PRIMARY = "brdfbench_conf"
+from brdfbench.conf_packages import ENTRY_POINT_GROUP, PRIMARY, config_packages, package_dir
+
+__all__ = ["ENTRY_POINT_GROUP", "PRIMARY", "PROVIDER", "BrdfbenchSearchPathPlugin", "config_packages"]
+
 PROVIDER = "brdfbench-searchpath-plugin"
 
 
@@ -40,28 +40,6 @@ def _warn(message: str) -> None:
     print(f"brdfbench: warning: {message}", file=sys.stderr)
 
 
-def config_packages() -> list[tuple[str, str]]:
-    """(entry-point name, package) for every `brdfbench.conf` entry point, in a stable
-    order (by name), without duplicates and without brdfbench's own primary package."""
-    seen: set[str] = {PRIMARY}
-    found: list[tuple[str, str]] = []
-    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: (e.name, e.value)):
-        package = ep.value.split(":", 1)[0].strip()
-        if package in seen:
-            continue
-        seen.add(package)
-        found.append((ep.name, package))
-    return found
-
-
-def _importable(package: str) -> bool:
-    try:
-        spec = importlib.util.find_spec(package)
-    except (ImportError, ValueError):  # a parent package that does not import, an empty name
-        return False
-    return spec is not None and spec.submodule_search_locations is not None
-
-
 class BrdfbenchSearchPathPlugin(SearchPathPlugin):
     def manipulate_search_path(self, search_path: ConfigSearchPath) -> None:
         paths = {_normal(element.path) for element in search_path.get_path()}
@@ -71,7 +49,7 @@ class BrdfbenchSearchPathPlugin(SearchPathPlugin):
             path = f"pkg://{package}"
             if path in paths:
                 continue
-            if not _importable(package):
+            if package_dir(package) is None:
                 _warn(f"entry point {ENTRY_POINT_GROUP}:{name} names {package!r}, which is not an "
                       "importable package; its configs are skipped")
                 continue

@@ -29,6 +29,7 @@ from hydra.plugins.search_path_plugin import SearchPathPlugin
 from hydra._internal.config_search_path_impl import ConfigSearchPathImpl
 
 import hydra_plugins.brdfbench_searchpath as searchpath
+from brdfbench import conf_packages
 
 SMOKE = ["dataset.params.size=small", "harness=quick", "limit=1"]
 
@@ -93,7 +94,8 @@ def _search_path(primary):
 
 def _entry_points(monkeypatch, *pairs):
     eps = [EntryPoint(name, value, searchpath.ENTRY_POINT_GROUP) for name, value in pairs]
-    monkeypatch.setattr(searchpath, "entry_points", lambda group: [e for e in eps if e.group == group])
+    # the entry points are listed by brdfbench.conf_packages, which the plugin and the core share
+    monkeypatch.setattr(conf_packages, "entry_points", lambda group: [e for e in eps if e.group == group])
 
 
 def test_appends_packages_after_the_primary_and_skips_what_does_not_import(monkeypatch, capsys):

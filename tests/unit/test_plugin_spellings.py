@@ -27,9 +27,9 @@ What "agree" means, per group:
   the resolved values): a variant that says "the rest as X.yaml" and drifted fails, and so
   does a stale entry.
 - harness options: `kind:` names a registered harness and `harness_config(kind, **keys)`
-  accepts every key (null `sampler_params` dropped first, as `brdfbench.hydra_config` does).
-  The option named after the kind (accuracy.yaml, render.yaml, ...; where a kind has none,
-  config.yaml's default option `default`) is the kind's main option, whose values equal its
+  accepts every key (null `sampler_params` dropped first by `harness_defaults.unset_nulls`,
+  as the CLI drops them). The option named after the kind (accuracy.yaml, render.yaml, ...)
+  is the kind's main option, whose values equal its
   Config dataclass's defaults except HARNESS_DIFFERENCES; the other harness options are
   variants of a kind's main option, as above.
 """
@@ -48,6 +48,7 @@ from omegaconf import OmegaConf
 
 from brdfbench import registry
 from brdfbench.pipeline.config import harness_class, harness_config
+from brdfbench.pipeline.harness_defaults import unset_nulls
 from brdfbench.specs import import_target
 
 REPO = Path(__file__).resolve().parents[2]
@@ -306,14 +307,12 @@ def test_nbrdf_reference_is_the_published_recipe():
 
 def _harness_values(stem: str) -> dict[str, Any]:
     """A harness option's keys as the pipeline hands them to harness_config (null sampler keys unset)."""
-    values = option("harness", stem)
-    if isinstance(values.get("sampler_params"), dict):
-        values["sampler_params"] = {k: v for k, v in values["sampler_params"].items() if v is not None}
-    return values
+    return unset_nulls(option("harness", stem))
 
 
 def _harness_main(kind: str) -> str:
-    return kind if (CONF / "harness" / f"{kind}.yaml").is_file() else "default"
+    """A harness kind's main option: the one named after it (harness=accuracy, …)."""
+    return kind
 
 
 HARNESS_STEMS = stems("harness")
