@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator
 
-from . import registry
+from .plugins import registry
 from .errors import ConfigError
 from .harness import HarnessConfig, Measurement
 
@@ -24,9 +24,9 @@ if TYPE_CHECKING:
     import torch
 
     from .data import Dataset
-    from .generator_protocol import Generator, TrainingData
-    from .protocol import Material, Representation
-    from .store_protocol import Store
+    from .protocols.generator import Generator, TrainingData
+    from .protocols.representation import Material, Representation
+    from .store.protocol import Store
 
 __all__ = ["Scores", "datasets", "evaluate", "generator", "render", "representation", "results", "training_data"]
 
@@ -78,7 +78,7 @@ def generator(name: str, **params: Any) -> Generator:
 def training_data(dataset: Dataset, names: list[str] | None = None) -> TrainingData:
     """What a generator's `fit` reads: the dataset's training split (its own, where it
     declares one; else every material), or the materials `names`."""
-    from .generator_protocol import TrainingData
+    from .protocols.generator import TrainingData
 
     if names is None:
         names = list((dataset.splits or {}).get("train", dataset.materials))
@@ -191,7 +191,7 @@ def results(folder: str | Path = "results", *, store: str = "sqlite", **store_pa
     """The results store of a benchmark's results folder (`results_dir`, what `brdfbench`
     writes), never created here: a folder without one is a DataError naming it. `.frame()`
     is the pandas DataFrame of its rows (one per material and metric)."""
-    from .store_protocol import open_store
+    from .store.protocol import open_store
 
     _checked(registry.get("stores", store).load(), store_params, "store_params", internal=("results_dir", "create"))
     return open_store(store, Path(folder), {**store_params, "create": False})

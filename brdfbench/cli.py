@@ -39,7 +39,7 @@ def _fail(message: str) -> int:
 
 
 def cmd_list(args) -> int:
-    from . import registry
+    from .plugins import registry
 
     group = args.group
     if group and group not in registry.GROUPS and f"{group}s" in registry.GROUPS:
@@ -75,7 +75,7 @@ def cmd_merge(args) -> int:
     transaction (a finished cell is never replaced, so merging again is harmless), then the
     reports are rewritten."""
     from .report import write_reports
-    from .store_protocol import merge, open_store
+    from .store.protocol import merge, open_store
 
     into = Path(args.into).resolve()
     sources = [open_store(args.store, Path(src), {"create": False}) for src in args.sources]
@@ -94,7 +94,7 @@ def cmd_merge(args) -> int:
 def cmd_check(args) -> int:
     """Each check runs in a worker process under `--timeout`: a plugin that crashes, ends
     the process or hangs fails that check (naming the cause) and the others still run."""
-    from . import registry
+    from .plugins import registry
     from .testing.isolated import check_isolated
 
     if args.timeout <= 0:
@@ -237,7 +237,7 @@ def _dispatch(argv: list[str]) -> int:
     if "-h" in argv or "--help" in argv:
         print(_help_text(), end="")
         return 0
-    from .hydra_app import run_hydra
+    from .hydra.app import run_hydra
 
     return run_hydra(argv)
 

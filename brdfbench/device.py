@@ -3,7 +3,7 @@
 `device` is run control (it never enters a configuration's hash): `auto` (the first CUDA
 device torch sees, else the CPU), `cpu`, `cuda` (the first CUDA device) or `cuda:N`. A
 plugin runs on the resolved device where its class declares that device's type in
-`devices` (see `brdfbench.protocol.Representation.to`), else on the CPU; every row records
+`devices` (see `brdfbench.protocols.representation.Representation.to`), else on the CPU; every row records
 the device its figures were measured on (`describe`).
 """
 

@@ -21,10 +21,11 @@ from pathlib import Path
 import safetensors.torch
 import torch
 
-from . import __version__, registry
+from . import __version__
+from .plugins import registry
 from .atomic import replacing
 from .errors import BrdfbenchError, ModelFileError, PluginError
-from .protocol import Representation
+from .protocols.representation import Representation
 
 _FORMAT = "brdfbench.model/1"
 #: group -> (format tag, header key naming the plugin, the word for it in messages)

@@ -6,8 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from . import registry
-from .store_protocol import open_store
+from .plugins import registry
+from .store.protocol import open_store
 
 
 def write_reports(results_dir: Path, store: str = "sqlite", store_params: dict[str, Any] | None = None) -> list[Path]:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from .specs import SceneSpec
+from .plugins.specs import SceneSpec
 
 BRDF_SPACE = SceneSpec(
     name="brdf_space",

@@ -32,10 +32,11 @@ from functools import cached_property, lru_cache
 import numpy as np
 import torch
 
-from brdfbench import merl, registry
+from brdfbench import merl
+from brdfbench.plugins import registry
 from brdfbench.device import CPU, synchronize
 from brdfbench.errors import ConfigError
-from brdfbench.generator_protocol import SampleSet, TrainingData, seeded_split
+from brdfbench.protocols.generator import SampleSet, TrainingData, seeded_split
 from brdfbench.harness import Harness, HarnessConfig, Measurement
 
 log = logging.getLogger(__name__)
@@ -139,7 +140,7 @@ class GenerationHarness(Harness):
 
         from brdfbench import artifacts
         from brdfbench.atomic import replacing
-        from brdfbench.generator_protocol import TRAINING_CURVE_KEY
+        from brdfbench.protocols.generator import TRAINING_CURVE_KEY
 
         ctx = self.context
         curves = model.metadata().get(TRAINING_CURVE_KEY)

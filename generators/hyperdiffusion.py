@@ -58,8 +58,8 @@ from torch import Tensor, nn
 from tqdm.auto import tqdm
 
 from brdfbench.errors import ConfigError, DataError, ModelFileError
-from brdfbench.generator_protocol import TRAINING_CURVE_KEY, Generator, SampleSet, TrainingData, WeightSet
-from brdfbench.generator_state import read_layout, weight_layout
+from brdfbench.protocols.generator import TRAINING_CURVE_KEY, Generator, SampleSet, TrainingData, WeightSet
+from brdfbench.protocols.generator_state import read_layout, weight_layout
 from brdfbench.nbrdf import network as net
 
 from .samples import WeightSamples

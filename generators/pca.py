@@ -38,8 +38,8 @@ from tqdm.auto import tqdm
 
 from brdfbench import logrel, merl
 from brdfbench.errors import ConfigError, ModelFileError
-from brdfbench.generator_protocol import Generator, ResourceError, SampleSet, TrainingData, WeightSet, available_memory
-from brdfbench.generator_state import check_layout, check_tensor, read_layout, weight_layout
+from brdfbench.protocols.generator import Generator, ResourceError, SampleSet, TrainingData, WeightSet, available_memory
+from brdfbench.protocols.generator_state import check_layout, check_tensor, read_layout, weight_layout
 from brdfbench_representations.pca import values_on_domain
 
 from .samples import TableSamples, WeightSamples

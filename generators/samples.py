@@ -15,11 +15,11 @@ from collections.abc import Callable, Sequence
 
 import torch
 
-from brdfbench.generator_protocol import SampleSet
+from brdfbench.protocols.generator import SampleSet
 from brdfbench.merl import MerlTable
 from brdfbench.nbrdf.layouts import unflatten
 from brdfbench.nbrdf.network import Network
-from brdfbench.protocol import Material, Representation
+from brdfbench.protocols.representation import Material, Representation
 
 
 class WeightSamples(SampleSet):

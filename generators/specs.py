@@ -1,6 +1,6 @@
 """Entry-point specs of the built-in generators (light: imports no implementation)."""
 
-from brdfbench.specs import GeneratorSpec
+from brdfbench.plugins.specs import GeneratorSpec
 
 TRAINING_SET = GeneratorSpec(
     name="training_set",
@@ -49,7 +49,7 @@ HYPERDIFFUSION = GeneratorSpec(
 )
 
 # The generation harness lives beside the generators, registered as any harness plugin.
-from brdfbench.specs import HarnessSpec  # noqa: E402
+from brdfbench.plugins.specs import HarnessSpec  # noqa: E402
 
 GENERATION = HarnessSpec(
     name="generation",

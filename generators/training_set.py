@@ -16,7 +16,7 @@ from typing import Any
 import torch
 
 from brdfbench.errors import ConfigError, ModelFileError
-from brdfbench.generator_protocol import Generator, SampleSet, TrainingData
+from brdfbench.protocols.generator import Generator, SampleSet, TrainingData
 from brdfbench.merl import N_CELLS
 
 from .samples import TableSamples

@@ -77,8 +77,8 @@ from tqdm.auto import tqdm
 from brdfbench import logrel, merl
 from brdfbench.errors import ConfigError, ModelFileError
 from brdfbench.threads import torch_threads
-from brdfbench.generator_protocol import TRAINING_CURVE_KEY, Generator, SampleSet, TrainingData
-from brdfbench.generator_state import check_tensor, read_layout, weight_layout
+from brdfbench.protocols.generator import TRAINING_CURVE_KEY, Generator, SampleSet, TrainingData
+from brdfbench.protocols.generator_state import check_tensor, read_layout, weight_layout
 
 from .pca import (
     FIT_OVERHEAD, MAX_MAPPED, values_on_domain, block_columns, check_fit_memory, chunked_combine, domain_table,

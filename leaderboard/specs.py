@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from brdfbench.specs import ReportSpec
+from brdfbench.plugins.specs import ReportSpec
 
 MARKDOWN = ReportSpec(
     name="markdown",

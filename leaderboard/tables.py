@@ -164,7 +164,7 @@ def failures(df: pd.DataFrame) -> pd.DataFrame:
 def metric_rank(name: str) -> int | None:
     """The metric plugin's ranking preference (`MetricSpec.rank`); None for an unranked or
     unregistered one (a store may hold figures of a plugin no longer installed)."""
-    from brdfbench import registry
+    from brdfbench.plugins import registry
 
     try:
         return registry.get("metrics", name).rank
@@ -175,7 +175,7 @@ def metric_rank(name: str) -> int | None:
 def is_reference(plugin: str, params: dict[str, Any] | None) -> bool:
     """Whether a stored configuration is its representation's reference (the target itself,
     `RepresentationSpec.reference`); False for a plugin no longer installed."""
-    from brdfbench import registry
+    from brdfbench.plugins import registry
 
     try:
         spec = registry.get("representations", plugin)
@@ -187,7 +187,7 @@ def is_reference(plugin: str, params: dict[str, Any] | None) -> bool:
 
 def dataset_caveat(name: str) -> str:
     """What the dataset plugin says its figures do not show (`DatasetSpec.caveat`), or ""."""
-    from brdfbench import registry
+    from brdfbench.plugins import registry
 
     try:
         return registry.get("datasets", name).caveat

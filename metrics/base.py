@@ -1,4 +1,4 @@
-"""The built-in BRDF-space metrics, as `brdfbench.metric_protocol.Metric` classes: the mean
+"""The built-in BRDF-space metrics, as `brdfbench.protocols.metric.Metric` classes: the mean
 of a functional twin's per-element terms (`functional`), streamed over chunks.
 
 `Metric` is re-exported here for plugins written against this module before the protocol
@@ -7,7 +7,7 @@ moved into the core.
 
 from __future__ import annotations
 
-from brdfbench.metric_protocol import Metric
+from brdfbench.protocols.metric import Metric
 
 from . import functional as F
 

@@ -43,7 +43,7 @@ import torch
 from brdfbench import coords, merl
 from brdfbench.harness.lobes import lobe_half_width, peak_row, theta_h_centres
 from brdfbench.merl import MerlTable
-from brdfbench.protocol import Material, Representation
+from brdfbench.protocols.representation import Material, Representation
 
 #: The seven categories, in Zhou et al.'s order.
 CATEGORIES = ("diffuse", "metallic", "low-specular", "mid-specular", "high-specular", "plastic", "mirror")

@@ -13,7 +13,7 @@ from typing import Any, Callable, ClassVar
 
 import torch
 
-from brdfbench.metric_protocol import ImageMetric as ImageMetricProtocol
+from brdfbench.protocols.metric import ImageMetric as ImageMetricProtocol
 
 from . import image_functional as IF
 

@@ -89,7 +89,7 @@ def build_set_simulator(scene: str = "sphere_envmap", *, spp: int | None = DEFAU
     (width and height default to `DEFAULT_SIZE`); the other keys are the render harness's,
     None taking its default. Build it once and `render_with` it for several sets (the
     reference and each sample draw): the scene, environment and kernels load once."""
-    from brdfbench import registry
+    from brdfbench.plugins import registry
     from brdfbench.pipeline.config import harness_class, harness_config
     from brdfbench.pipeline.plan import check_params
     from brdfbench.render.simulate import build_simulator

@@ -11,7 +11,7 @@ the job names none) for its own heavy work (FID: the network's feature extractio
 
 from __future__ import annotations
 
-from brdfbench.metric_protocol import ImageSetMetric, SetMetric
+from brdfbench.protocols.metric import ImageSetMetric, SetMetric
 
 from . import distributional as dist
 

@@ -1,6 +1,6 @@
 """Entry-point specs of the built-in metrics."""
 
-from brdfbench.specs import MetricSpec
+from brdfbench.plugins.specs import MetricSpec
 
 L1 = MetricSpec(
     name="l1", description="Mean |f1 - f2| over valid MERL grid cells", target="brdfbench_metrics.base:L1",

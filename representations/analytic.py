@@ -18,7 +18,7 @@ import torch
 
 from brdfbench import reused
 from brdfbench.errors import ConfigError, ModelFileError
-from brdfbench.protocol import Material, Representation
+from brdfbench.protocols.representation import Material, Representation
 from brdfbench.state_checks import expect_tensor
 
 from .fit_losses import DEFAULT_LOSS, FIT_LOSSES

@@ -43,7 +43,7 @@ from scipy.optimize import minimize
 from brdfbench import merl
 from brdfbench.errors import DataError
 from brdfbench.threads import torch_threads
-from brdfbench.protocol import Material, Representation
+from brdfbench.protocols.representation import Material, Representation
 
 from .analytic_terms import HALF_WIDTH_PER_ALPHA, Geometry, geometry
 from .fit_losses import DEFAULT_LOSS, LOSSES, FitLoss, compared, sample_pairs

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from brdfbench import merl
-from brdfbench.protocol import Material, Representation
+from brdfbench.protocols.representation import Material, Representation
 from brdfbench.state_checks import expect_tensor
 
 

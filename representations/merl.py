@@ -17,7 +17,7 @@ import torch
 from brdfbench import merl
 from brdfbench.errors import ConfigError
 from brdfbench.merl import MerlTable
-from brdfbench.protocol import Material, Representation
+from brdfbench.protocols.representation import Material, Representation
 from brdfbench.state_checks import expect_tensor
 
 MODES = ("nearest", "trilinear")

@@ -31,7 +31,7 @@ from brdfbench.errors import BrdfbenchError, ConfigError, ModelFileError
 from brdfbench.nbrdf import network as net
 from brdfbench.nbrdf.formats import read_network
 from brdfbench.nbrdf.network import Network
-from brdfbench.protocol import FIT_LOSS_KEY, Material, Representation
+from brdfbench.protocols.representation import FIT_LOSS_KEY, Material, Representation
 
 from .nbrdf_fit import Recipe, fit_batched
 

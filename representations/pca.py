@@ -26,8 +26,8 @@ import numpy as np
 import torch
 
 from brdfbench import logrel, merl
-from brdfbench.errors import ConfigError, DataError, ModelFileError
-from brdfbench.protocol import Material, Representation
+from brdfbench.errors import ConfigError, DataError
+from brdfbench.protocols.representation import Material, Representation
 from brdfbench.state_checks import expect_tensor
 
 from .merl import NEAREST_FLOPS

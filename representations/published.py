@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 import torch
 
 from brdfbench.errors import ConfigError, DataError, ModelFileError
-from brdfbench.protocol import Material, Representation
+from brdfbench.protocols.representation import Material, Representation
 
 from .analytic import AnalyticBRDF
 from .published_parse import FitFile, read_fit_file

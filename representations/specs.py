@@ -1,6 +1,6 @@
 """Entry-point specs of the built-in representations (light: imports no implementation)."""
 
-from brdfbench.specs import RepresentationSpec
+from brdfbench.plugins.specs import RepresentationSpec
 
 #: The kit's quick run of the literature's analytic models: a short fit.
 QUICK_FIT = {"n_samples": 4096, "restarts": 1}

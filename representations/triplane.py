@@ -22,7 +22,7 @@ import torch
 
 from brdfbench import reused
 from brdfbench.errors import ConfigError, ModelFileError
-from brdfbench.protocol import FIT_LOSS_KEY, Material, Representation
+from brdfbench.protocols.representation import FIT_LOSS_KEY, Material, Representation
 
 from . import triplane_fit as tf
 from . import triplane_model as tm

@@ -163,7 +163,7 @@ def fitted():
     not change the model they get."""
     import json
 
-    from brdfbench import registry
+    from brdfbench.plugins import registry
     from brdfbench.testing.kit import reference_material
 
     cache: dict = {}
@@ -188,8 +188,8 @@ def fitted():
 def plugin():
     """`plugin(cls, name=None)`: register a test representation class (Lambert's tags) in
     this process for the test's life; returns its name (default: the class name, lowercased)."""
-    from brdfbench import registry
-    from brdfbench.specs import RepresentationSpec
+    from brdfbench.plugins import registry
+    from brdfbench.plugins.specs import RepresentationSpec
     from brdfbench_representations.lambert import Lambert
 
     added = []

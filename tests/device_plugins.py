@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from brdfbench.generator_protocol import Generator
+from brdfbench.protocols.generator import Generator
 from brdfbench_generators.samples import WeightSamples
 
 

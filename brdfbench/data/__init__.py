@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING, Callable, Iterator, Mapping
 from ..errors import DataError
 
 if TYPE_CHECKING:  # keep `import brdfbench.data.specs` light: listing plugins must not import torch
-    from ..generator_protocol import WeightSet
-    from ..protocol import Material
+    from ..protocols.generator import WeightSet
+    from ..protocols.representation import Material
 
 #: Largest plausible BRDF value (1/sr). The brightest measured specular peaks reach a few
 #: thousand; values far above (1e300 in a damaged file) are corruption, and overflow fp32 metrics.

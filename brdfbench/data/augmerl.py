@@ -19,7 +19,7 @@ From any registered base dataset of n materials:
 
 `size` ≤ 6n keeps a seeded subset of the permuted materials (no PCA at all); a larger size
 keeps all 6n and adds size − 6n mixes. `splits` holds a seeded `test_fraction` out
-(`brdfbench.generator_protocol.seeded_split`); a test material's parents or siblings may
+(`brdfbench.protocols.generator.seeded_split`); a test material's parents or siblings may
 be in training, as in Zhou et al..
 
 The PCA state (reference, pooled mean, centred base channel vectors, validity,
@@ -56,10 +56,11 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from .. import logrel, merl, registry
+from .. import logrel, merl
+from ..plugins import registry
 from ..errors import ConfigError, DataError, PluginError
 from ..merl import MerlTable
-from ..protocol import Material
+from ..protocols.representation import Material
 from . import Dataset
 from . import _augmerl_pca as kpca
 from ._progress import Progress, note
@@ -258,7 +259,7 @@ def pca_nbytes(n: int) -> int:
 
 def check_memory(n: int) -> None:
     """Refuse, before any work, a PCA that needs more than MEMORY_SHARE of the free memory."""
-    from ..generator_protocol import ResourceError, available_memory
+    from ..protocols.generator import ResourceError, available_memory
 
     need, free = pca_nbytes(n), available_memory()
     if need > MEMORY_SHARE * free:
@@ -460,7 +461,7 @@ def augmerl_dataset(base: str = "synthetic", base_params: Mapping[str, Any] | No
         check_memory(len(base_ds))
     recipes: dict[str, Permuted | Mix] = {r.name: r for r in (*permuted, *mixes)}
     names = tuple(recipes)
-    from ..generator_protocol import seeded_split
+    from ..protocols.generator import seeded_split
 
     train, test = seeded_split(names, test_fraction, seed)
     loader = AugmerlLoader(base, base_ds, recipes, k, cache_dir, placed)

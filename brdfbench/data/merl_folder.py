@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..errors import DataError
 from ..merl import read_binary
-from ..protocol import Material
+from ..protocols.representation import Material
 from . import Dataset
 from .content_hash import file_digests
 

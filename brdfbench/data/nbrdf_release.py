@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from ..errors import ConfigError, DataError
-from ..protocol import Material
+from ..protocols.representation import Material
 from . import Dataset
 from ..nbrdf.keras_h5 import read_nbrdf_h5
 from .grid_cache import ArrayCache, weights_digest

@@ -44,9 +44,9 @@ from urllib.parse import quote
 import numpy as np
 import torch
 
-from .. import registry
+from ..plugins import registry
 from ..errors import ConfigError, DataError, ModelFileError
-from ..generator_protocol import WeightSet
+from ..protocols.generator import WeightSet
 from ..nbrdf.formats import read_network, representation_for, write_network
 from ..nbrdf.layouts import flatten
 from ..nbrdf.network import Network

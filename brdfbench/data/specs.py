@@ -1,6 +1,6 @@
 """Entry-point specs of the built-in datasets."""
 
-from ..specs import DatasetSpec
+from ..plugins.specs import DatasetSpec
 
 SYNTHETIC = DatasetSpec(
     name="synthetic",

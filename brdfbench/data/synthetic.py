@@ -40,7 +40,7 @@ from ..atomic import replacing
 from ..coords import half_vector
 from ..errors import ConfigError, DataError
 from ..merl import MerlTable
-from ..protocol import Material
+from ..protocols.representation import Material
 from . import Dataset
 from .content_hash import DigestCache, cache_root, recorded_digest, sha256_file
 

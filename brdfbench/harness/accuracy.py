@@ -24,8 +24,8 @@ from typing import Any, Callable
 import torch
 
 from .. import merl, reused
-from ..protocol import Material, Representation
-from ..specs import MetricSpec
+from ..protocols.representation import Material, Representation
+from ..plugins.specs import MetricSpec
 from . import Measurement, directions
 
 

@@ -34,9 +34,9 @@ from typing import Any, Callable, Sequence
 import torch
 
 from ..errors import ConfigError
-from ..protocol import Material, Representation
+from ..protocols.representation import Material, Representation
 from ..provenance import config_hash
-from ..specs import MetricSpec
+from ..plugins.specs import MetricSpec
 from . import Harness, HarnessContext, Measurement
 from .render import MONTE_CARLO, RenderConfig, cached_render, check_simulation
 

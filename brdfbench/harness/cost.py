@@ -15,7 +15,7 @@ import time
 import torch
 
 from ..device import synchronize
-from ..protocol import FIT_LOSS_KEY, Representation
+from ..protocols.representation import FIT_LOSS_KEY, Representation
 from . import Measurement, directions
 
 

@@ -25,9 +25,9 @@ import torch
 
 from .. import images
 from ..errors import ConfigError, DataError
-from ..protocol import Material, Representation
+from ..protocols.representation import Material, Representation
 from ..provenance import config_hash
-from ..specs import MetricSpec
+from ..plugins.specs import MetricSpec
 from . import Harness, HarnessConfig, HarnessContext, Measurement
 
 log = logging.getLogger(__name__)
@@ -254,7 +254,7 @@ class RenderConfig(HarnessConfig):
 
 def check_simulation(config, scene) -> None:
     """Light up-front checks of the simulator, backend and sampler a rendered harness asks for."""
-    from .. import registry
+    from ..plugins import registry
 
     scene.chosen_simulator(config.simulator)
     spec = registry.get("samplers", config.sampler)
@@ -277,7 +277,7 @@ class ImageHarness(Harness):
         super().validate(config, scene, metric_specs)
         check_simulation(config, scene)
         if config.display_sampler != FITTED:
-            from .. import registry
+            from ..plugins import registry
 
             registry.get("samplers", config.display_sampler)
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..specs import HarnessSpec
+from ..plugins.specs import HarnessSpec
 
 ACCURACY = HarnessSpec(
     name="accuracy",

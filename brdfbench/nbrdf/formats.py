@@ -28,7 +28,8 @@ from typing import Mapping, Sequence
 import numpy as np
 import torch
 
-from .. import modelio, registry
+from .. import modelio
+from ..plugins import registry
 from ..errors import DataError, ModelFileError, PluginError
 from .keras_h5 import read_nbrdf_h5
 from .layouts import check_finite, check_hidden, flatten, from_torch_state, to_torch_state, unflatten

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .. import registry
+from ..plugins import registry
 from ..device import check_spec
 from ..errors import ConfigError
 from ..harness import HarnessConfig, check_value
@@ -116,6 +116,6 @@ class RunConfig:
 
     def open_store(self):
         """The job's results store (the `store` plugin for `results_dir`)."""
-        from ..store_protocol import open_store
+        from ..store.protocol import open_store
 
         return open_store(self.store, self.results_dir, self.store_params)

@@ -18,7 +18,7 @@ from importlib import metadata
 from pathlib import Path
 
 from ..provenance import config_hash
-from ..store_protocol import Environment
+from ..store.protocol import Environment
 
 ACTIVE_DIR = Path(tempfile.gettempdir()) / f"brdfbench-active-{os.getuid() if hasattr(os, 'getuid') else 0}"
 

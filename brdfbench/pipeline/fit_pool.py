@@ -55,7 +55,7 @@ class _Target:
 
     def material(self):
         from ..merl import MerlTable
-        from ..protocol import Material
+        from ..protocols.representation import Material
 
         raw = np.asarray(np.load(self.path, mmap_mode="r"))
         return Material(self.name, MerlTable(raw), self.category, self.source)

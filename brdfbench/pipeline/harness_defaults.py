@@ -17,7 +17,7 @@ from typing import Any
 
 import yaml
 
-from ..conf_packages import search_path
+from ..hydra.packages import search_path
 from ..errors import ConfigError
 
 GROUP = "harness"

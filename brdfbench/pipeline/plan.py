@@ -16,7 +16,8 @@ from typing import Any, Callable
 import torch
 
 from .. import device as devices
-from .. import parallelism, registry
+from .. import parallelism
+from ..plugins import registry
 from ..errors import ConfigError
 from ..provenance import config_hash
 from .config import RunConfig, harness_class

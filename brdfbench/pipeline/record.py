@@ -10,8 +10,8 @@ from __future__ import annotations
 from .. import __version__
 from ..harness import Measurement
 from ..provenance import git_sha
-from ..store import now
-from ..store_protocol import ConfigRecord, Environment, Row, Store
+from ..store.sqlite import now
+from ..store.protocol import ConfigRecord, Environment, Row, Store
 from .plan import Plan
 
 

@@ -1,8 +1,8 @@
 """A run from its jobs to its report: every job checked before any work, each run (plan →
 execute → record), then the reports of their results folders written once.
 
-`run_sweep(jobs)` is all of it in one call. Hydra's adapter (`brdfbench.hydra_app`,
-`brdfbench.hydra_callbacks`), whose launchers start the jobs themselves, takes the same
+`run_sweep(jobs)` is all of it in one call. Hydra's adapter (`brdfbench.hydra.app`,
+`brdfbench.hydra.callbacks`), whose launchers start the jobs themselves, takes the same
 steps one at a time: `check_jobs` before the first job, `run_one` for each job (with what
 `check_jobs` loaded, where the job runs in this process), `finish` after the last.
 

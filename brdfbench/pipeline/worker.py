@@ -34,7 +34,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from .. import registry
+from ..plugins import registry
 from ..errors import BrdfbenchError
 from .config import RunConfig
 from .memory import format_size, process_peak, process_rss, reset_process_peak

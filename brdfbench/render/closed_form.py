@@ -13,7 +13,7 @@ import functools
 
 import torch
 
-from ..protocol import Representation
+from ..protocols.representation import Representation
 from . import sphere
 from .simulator import Simulator, SphereHits, eval_brdf, light_terms, sphere_hits
 

@@ -16,7 +16,7 @@ import functools
 
 import torch
 
-from ..protocol import Representation
+from ..protocols.representation import Representation
 from ..sampling import Sampler
 from ..scenes import Scene
 from . import sphere

@@ -56,9 +56,10 @@ import mitsuba as mi
 import numpy as np
 import torch
 
-from .. import modelio, registry
+from .. import modelio
+from ..plugins import registry
 from ..errors import BrdfbenchError, ConfigError, ModelFileError, PluginError, RenderError
-from ..protocol import Representation
+from ..protocols.representation import Representation
 from .drjit_kernels import kernel_for
 from .drjit_samplers import sampler_for
 

@@ -38,7 +38,7 @@ import torch
 
 from .. import mitsuba_env
 from ..errors import ConfigError, RenderError
-from ..protocol import Representation
+from ..protocols.representation import Representation
 from ..scenes import Scene
 from .mitsuba_integrators import CLOSED_FORM_INTEGRATOR, DIRECT_MIS_INTEGRATOR, register_integrators
 from .simulator import Simulator
@@ -124,7 +124,7 @@ class MitsubaSimulator(Simulator):
         """The registered name of the model's class (error messages use it); the adapter's
         own `UNREGISTERED` plugin for a model of no registered class, such as the harness's
         table reference."""
-        from .. import registry
+        from ..plugins import registry
 
         names = mitsuba_bsdf.register_plugins()
         if type(model) not in _PLUGIN_NAMES:

@@ -6,7 +6,8 @@ from typing import Any
 
 import torch
 
-from .. import mitsuba_env, registry
+from .. import mitsuba_env
+from ..plugins import registry
 from ..errors import ConfigError
 from ..scenes import PROCEDURAL_SKY, Environment, Scene
 from .simulator import Simulator

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from ..errors import RenderError
-from ..protocol import Representation
+from ..protocols.representation import Representation
 from ..scenes import Scene
 from . import sphere
 from .camera import Camera

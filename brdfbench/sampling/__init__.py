@@ -1,6 +1,6 @@
 """The importance-sampler protocol: draw ωo given ωi, and say with what density.
 
-A sampler is a plugin (group `brdfbench.samplers`, spec `brdfbench.specs.SamplerSpec`)
+A sampler is a plugin (group `brdfbench.samplers`, spec `brdfbench.plugins.specs.SamplerSpec`)
 built from keyword parameters. `sample(wi, u)` maps uniform variates u ∈ [0, 1)², shape
 (N, 2), to directions ωo (N, 3); `pdf(wi, wo)` is the solid-angle density (N,) of ωo
 given ωi. Both keep the input dtype (fp32 or fp64), are finite, and pdf is ≥ 0 and exactly

@@ -1,6 +1,6 @@
 """Entry-point specs of the built-in samplers (light: imports no implementation)."""
 
-from brdfbench.specs import SamplerSpec
+from brdfbench.plugins.specs import SamplerSpec
 
 _HEMISPHERE = frozenset({"hemisphere"})
 _MICROFACET = frozenset({"microfacet"})

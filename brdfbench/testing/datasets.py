@@ -30,11 +30,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .. import registry
+from ..plugins import registry
 from ..data import Dataset, check_table
 from ..errors import BrdfbenchError, ConfigError, DataError
-from ..protocol import Material
-from ..specs import DatasetSpec
+from ..protocols.representation import Material
+from ..plugins.specs import DatasetSpec
 from .checks import CheckSet
 from .kit import Check, ConformanceReport
 

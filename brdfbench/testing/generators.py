@@ -32,11 +32,11 @@ from functools import lru_cache
 import numpy as np
 import torch
 
-from .. import registry
+from ..plugins import registry
 from ..errors import BrdfbenchError, ConfigError
-from ..generator_protocol import LEARNS_FROM, Generator, ResourceError, SampleSet, TrainingData, WeightSet
-from ..protocol import Material, Representation
-from ..specs import GeneratorSpec
+from ..protocols.generator import LEARNS_FROM, Generator, ResourceError, SampleSet, TrainingData, WeightSet
+from ..protocols.representation import Material, Representation
+from ..plugins.specs import GeneratorSpec
 from . import roundtrip
 from .adversarial import adversarial_pairs
 from .checks import CheckSet
@@ -119,7 +119,7 @@ def _arrays_equal(a: SampleSet, b: SampleSet) -> bool:
 def check_protocol(ctx: Context) -> None:
     cls = ctx.spec.load()
     assert isinstance(cls, type) and issubclass(cls, Generator), (
-        f"{ctx.spec.target} must be a subclass of brdfbench.generator_protocol.Generator")
+        f"{ctx.spec.target} must be a subclass of brdfbench.protocols.generator.Generator")
     assert cls.learns_from in LEARNS_FROM, f"{cls.__name__}.learns_from={cls.learns_from!r}: one of {LEARNS_FROM}"
     assert ctx.spec.learns_from == cls.learns_from, (
         f"the spec says it learns from {ctx.spec.learns_from!r}, {cls.__name__}.learns_from is {cls.learns_from!r}")

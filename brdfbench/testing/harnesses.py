@@ -42,15 +42,15 @@ from typing import Any
 import numpy as np
 import torch
 
-from .. import registry
+from ..plugins import registry
 from ..data import Dataset
 from ..errors import ConfigError
 from ..harness import DTYPES, Harness, HarnessConfig, HarnessContext, Measurement
 from ..merl import SHAPE, MerlTable
-from ..metric_protocol import DOMAINS
-from ..protocol import Material, Representation
+from ..protocols.metric import DOMAINS
+from ..protocols.representation import Material, Representation
 from ..provenance import config_hash
-from ..specs import HarnessSpec
+from ..plugins.specs import HarnessSpec
 from .checks import CheckSet
 from .kit import Check, ConformanceReport
 

@@ -24,7 +24,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from .. import registry
+from ..plugins import registry
 from ..pipeline.processes import die_with_parent as _die_with_parent
 from ..pipeline.processes import exit_cause
 from ..pipeline.processes import sync_environment as _sync_environment

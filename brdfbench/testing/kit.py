@@ -12,9 +12,10 @@ from typing import Callable
 
 import torch
 
-from .. import modelio, registry
-from ..protocol import Material, Representation
-from ..specs import RepresentationSpec
+from .. import modelio
+from ..plugins import registry
+from ..protocols.representation import Material, Representation
+from ..plugins.specs import RepresentationSpec
 from . import roundtrip
 from .adversarial import adversarial_pairs
 from .checks import CheckSet
@@ -84,7 +85,7 @@ check = CHECKS.register
 def check_protocol(ctx: Context) -> None:
     cls = ctx.spec.load()
     assert isinstance(cls, type) and issubclass(cls, Representation), (
-        f"{ctx.spec.target} must be a subclass of brdfbench.protocol.Representation"
+        f"{ctx.spec.target} must be a subclass of brdfbench.protocols.representation.Representation"
     )
     missing = {"fittable", "reciprocal", "isotropic", "needs_training"} & ctx.spec.tags - cls.tags
     assert not missing, f"spec tags {sorted(missing)} are not declared on {cls.__name__}.tags"

@@ -3,7 +3,7 @@
     from brdfbench.testing import check_metric
     check_metric("my_metric").raise_on_failure()
 
-The metric's `domain` (`brdfbench.metric_protocol`) says what the kit feeds it, as its
+The metric's `domain` (`brdfbench.protocols.metric`) says what the kit feeds it, as its
 harness does: BRDF values (N, 3) with cos θi (`merl_grid`, `random_pairs`), HDR images
 (`image`: radiance reaching past 1, so tone mapping clips; single images (H, W, 3) and
 batches), distance matrices of two point sets (`set`), two sets of images (`image_set`).
@@ -33,10 +33,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from .. import registry
+from ..plugins import registry
 from ..errors import BrdfbenchError
-from ..metric_protocol import DOMAINS, STREAMING
-from ..specs import MetricSpec
+from ..protocols.metric import DOMAINS, STREAMING
+from ..plugins.specs import MetricSpec
 from .checks import CheckSet
 from .kit import Check, ConformanceReport
 
@@ -293,7 +293,7 @@ def check_chunking_invariant(ctx: Context) -> None:
 def check_merge_invariant(ctx: Context) -> None:
     """Two instances' merged states score as one instance that saw both halves."""
     if not callable(getattr(ctx.cls, "merge", None)):
-        raise unittest.SkipTest(f"{ctx.cls.__name__} has no merge (brdfbench.metric_protocol.StreamingMean has one)")
+        raise unittest.SkipTest(f"{ctx.cls.__name__} has no merge (brdfbench.protocols.metric.StreamingMean has one)")
     w = ctx.where("merge_invariant")
     target, cos_i, noise = ctx.inputs()
     pred = target * (1 + 2 * noise)

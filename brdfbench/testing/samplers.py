@@ -45,10 +45,10 @@ from typing import Sequence
 
 import torch
 
-from .. import registry
+from ..plugins import registry
 from ..sampling import Sampler
 from ..sampling.chi2 import SIGNIFICANCE, Unresolvable, chi2_test, torch_threads
-from ..specs import SamplerSpec
+from ..plugins.specs import SamplerSpec
 from .adversarial import adversarial_pairs
 from .checks import CheckSet
 from .kit import Check, ConformanceReport

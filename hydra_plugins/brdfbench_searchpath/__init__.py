@@ -25,7 +25,7 @@ import sys
 from hydra.core.config_search_path import ConfigSearchPath
 from hydra.plugins.search_path_plugin import SearchPathPlugin
 
-from brdfbench.conf_packages import ENTRY_POINT_GROUP, PRIMARY, config_packages, package_dir
+from brdfbench.hydra.packages import ENTRY_POINT_GROUP, PRIMARY, config_packages, package_dir
 
 __all__ = ["ENTRY_POINT_GROUP", "PRIMARY", "PROVIDER", "BrdfbenchSearchPathPlugin", "config_packages"]
 

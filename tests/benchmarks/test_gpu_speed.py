@@ -100,7 +100,7 @@ def test_nbrdf_fit_per_material_over_the_100_merl_tables(benchmark, enabled, gpu
 @pytest.mark.parametrize("name", ["nbrdf", "naive_mlp"])
 def test_eval_throughput_in_the_accuracy_harness(benchmark, enabled, gpu, rates, name, synthetic_cache):
     """`evals_per_s` as the accuracy harness measures it on a GPU (encoding included)."""
-    from brdfbench import registry
+    from brdfbench.plugins import registry
     from brdfbench.data.synthetic import synthetic_dataset
     from brdfbench.harness.accuracy_harness import AccuracyConfig
 

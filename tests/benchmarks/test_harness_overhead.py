@@ -20,12 +20,13 @@ import time
 
 import pytest
 
-from brdfbench import merl, registry
+from brdfbench import merl
+from brdfbench.plugins import registry
 from brdfbench.data.synthetic import generate_material
 from brdfbench.harness import directions
 from brdfbench.harness.accuracy import accuracy_geometry, evaluate_accuracy
 from brdfbench.harness.cost import evaluation_throughput
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 
 METRICS = ("l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae")
 N_RANDOM = 2**20

@@ -24,7 +24,7 @@ import pytest
 import torch
 
 from brdfbench.data.nbrdf_release import find_release_dir
-from brdfbench.generator_protocol import TrainingData, WeightSet
+from brdfbench.protocols.generator import TrainingData, WeightSet
 from brdfbench.nbrdf import network as nw
 from brdfbench.nbrdf.formats import read_network
 from brdfbench.nbrdf.layouts import flatten

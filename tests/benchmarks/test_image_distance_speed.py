@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import torch
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench_metrics import fid as FD
 from brdfbench_metrics import image_distances as D
 

@@ -30,7 +30,8 @@ import time
 import pytest
 import torch
 
-from brdfbench import mitsuba_env, registry
+from brdfbench import mitsuba_env
+from brdfbench.plugins import registry
 from brdfbench.testing.kit import reference_material
 
 RESOLUTION, SPP = 256, 16

@@ -32,7 +32,7 @@ def test_merl_lookup(benchmark, pairs, mode):
 
 
 def _fitted(name, **params):
-    from brdfbench import registry
+    from brdfbench.plugins import registry
 
     model = registry.get("representations", name).create(**params)
     if model.needs_training:
@@ -47,7 +47,7 @@ def test_representation_eval(benchmark, pairs, name):
 
 @pytest.mark.parametrize("name", ["cook_torrance", "ggx", "blinn_phong"])
 def test_analytic_fit(benchmark, name):
-    from brdfbench import registry
+    from brdfbench.plugins import registry
 
     spec = registry.get("representations", name)
     target = reference_material()

@@ -15,7 +15,7 @@ from brdfbench import data
 from brdfbench.data import Dataset
 from brdfbench.data.merl_folder import merl_folder_dataset
 from brdfbench.errors import DataError
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 
 
 def one_error_line(out) -> str:
@@ -113,7 +113,7 @@ def test_merl_folder_given_a_file_is_one_line(tmp_path, folder, cli):
 
 
 def test_inspect_of_a_model_naming_another_representation_is_one_line(tmp_path, cli):
-    from brdfbench import registry
+    from brdfbench.plugins import registry
 
     ggx = registry.get("representations", "ggx").create()
     path = tmp_path / "model.safetensors"

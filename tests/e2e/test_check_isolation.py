@@ -19,8 +19,8 @@ import signal
 import time
 
 import torch
-from brdfbench.protocol import Representation
-from brdfbench.specs import RepresentationSpec
+from brdfbench.protocols.representation import Representation
+from brdfbench.plugins.specs import RepresentationSpec
 from brdfbench.state_checks import expect_tensor
 
 TAGS = frozenset({"fittable", "reciprocal", "isotropic"})
@@ -181,8 +181,8 @@ def test_a_healthy_builtin_passes_under_isolation(tmp_path):
 
 def test_in_process_registrations_reach_the_worker(site, monkeypatch):
     """A plugin registered with `registry.register` (not an entry point) is checked in the worker."""
-    from brdfbench import registry
-    from brdfbench.specs import RepresentationSpec
+    from brdfbench.plugins import registry
+    from brdfbench.plugins.specs import RepresentationSpec
     from brdfbench.testing.isolated import check_isolated
 
     monkeypatch.syspath_prepend(str(site))
@@ -227,8 +227,8 @@ def test_a_sampler_is_checked_in_isolation_with_its_chi2_cells(tmp_path):
 
 
 def test_a_broken_sampler_fails_its_chi2_cells_in_the_worker(tmp_path, monkeypatch):
-    from brdfbench import registry
-    from brdfbench.specs import SamplerSpec
+    from brdfbench.plugins import registry
+    from brdfbench.plugins.specs import SamplerSpec
     from brdfbench.testing.isolated import check_isolated
 
     (tmp_path / "broken_sampler.py").write_text(BROKEN_SAMPLER)

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from brdfbench.store import ResultsStore
+from brdfbench.store.sqlite import ResultsStore
 
 QUICK = ["dataset.params.size=small", "harness=quick", "limit=3"]
 FIRST_LOOK = ("merl", "lambert", "blinn_phong", "cook_torrance", "ggx", "pca", "nbrdf_brief", "naive_mlp_brief",

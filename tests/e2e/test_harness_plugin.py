@@ -8,7 +8,7 @@ import textwrap
 
 import pytest
 
-from brdfbench.store import ResultsStore
+from brdfbench.store.sqlite import ResultsStore
 
 HARNESS = '''
 from dataclasses import dataclass, field
@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import torch
 
 from brdfbench.harness import Harness, HarnessConfig, Measurement
-from brdfbench.specs import HarnessSpec
+from brdfbench.plugins.specs import HarnessSpec
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,8 @@ import pytest
 import safetensors.torch
 import torch
 
-from brdfbench import modelio, registry
+from brdfbench import modelio
+from brdfbench.plugins import registry
 from brdfbench.testing.kit import reference_material
 
 from test_bad_input import one_error_line  # tests/e2e is on sys.path (pytest prepend import mode)

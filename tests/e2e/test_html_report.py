@@ -118,7 +118,7 @@ def test_the_report_rebuilds_from_a_store_a_sweep_is_still_writing(tmp_path, cli
     import sys
     import time
 
-    from brdfbench.store import ResultsStore
+    from brdfbench.store.sqlite import ResultsStore
 
     res = tmp_path / "res"
     env = {**os.environ, "BRDFBENCH_CACHE": str(synthetic_cache)}

@@ -11,11 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from brdfbench import hydra_app, hydra_callbacks, registry
+from brdfbench.hydra import app as hydra_app
+from brdfbench.hydra import callbacks as hydra_callbacks
+from brdfbench.plugins import registry
 from brdfbench.data.synthetic import synthetic_dataset
 from brdfbench.pipeline import plan, sweep
 from brdfbench.pipeline.config import RunConfig, harness_config
-from brdfbench.specs import DatasetSpec
+from brdfbench.plugins.specs import DatasetSpec
 
 from test_bad_input import one_error_line  # tests/e2e is on sys.path (pytest prepend import mode)
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from brdfbench.store import ResultsStore
+from brdfbench.store.sqlite import ResultsStore
 
 MATERIALS = "materials=[synth-plastic-green-00,synth-metal-chrome-01,synth-fabric-cotton-green-03]"
 ARGS = ["dataset.params.size=small", "harness=quick", "progress=lines", MATERIALS]
@@ -90,7 +90,7 @@ def test_the_worker_exits_cleanly_after_side_by_side_fits(tmp_path):
     waiting on them until it is killed."""
     from omegaconf import OmegaConf
 
-    from brdfbench.hydra_config import to_run_config
+    from brdfbench.hydra.jobs import to_run_config
     from brdfbench.pipeline.plan import Task
     from brdfbench.pipeline.worker import Worker
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from brdfbench.report import write_reports
-from brdfbench.store import ConfigRecord, ResultsStore, Row
+from brdfbench.store.sqlite import ConfigRecord, ResultsStore, Row
 
 WIDTH, HEIGHT = 1400, 1000
 #: label → (plugin, {metric: (value, unit, higher is better)}) in BRDF space

@@ -111,7 +111,7 @@ def test_datasets_errors_name_what_exists_and_the_key():
 
 
 def test_representation_is_the_plugin_unfitted_with_its_params():
-    from brdfbench import registry
+    from brdfbench.plugins import registry
 
     model = bb.representation("merl", mode="trilinear")
     assert isinstance(model, registry.get("representations", "merl").load())
@@ -128,7 +128,7 @@ def test_representation_is_the_plugin_unfitted_with_its_params():
 
 
 def test_evaluate_scores_as_the_accuracy_harness(model, material):
-    from brdfbench import registry
+    from brdfbench.plugins import registry
     from brdfbench.harness.accuracy import evaluate_accuracy
     from brdfbench.pipeline.config import harness_config
 
@@ -170,7 +170,7 @@ def test_evaluate_errors_name_the_metric_or_key(model, material):
 
 
 def test_render_goes_through_the_harness_simulator(model):
-    from brdfbench import registry
+    from brdfbench.plugins import registry
     from brdfbench.render.simulate import build_simulator
 
     image = bb.render(model, "sphere_envmap", width=16, height=12, spp=4, backend="torch")

@@ -16,9 +16,9 @@ import pytest
 import torch
 
 import brdfbench as bb
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
-from brdfbench.specs import import_target
+from brdfbench.plugins.specs import import_target
 
 REPO = Path(__file__).resolve().parents[2]
 SECTION = "## Registering your own plugins"
@@ -209,7 +209,7 @@ def test_harness_passes_the_kit_and_measures_through_the_pipeline(install, tmp_p
     from brdfbench.harness import HarnessContext
     from brdfbench.pipeline.config import RunConfig, harness_config
     from brdfbench.pipeline.sweep import run_job as run
-    from brdfbench.store import ResultsStore
+    from brdfbench.store.sqlite import ResultsStore
 
     install("harness", "dataset")
     run_kit("harness")

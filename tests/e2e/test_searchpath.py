@@ -29,7 +29,7 @@ from hydra.plugins.search_path_plugin import SearchPathPlugin
 from hydra._internal.config_search_path_impl import ConfigSearchPathImpl
 
 import hydra_plugins.brdfbench_searchpath as searchpath
-from brdfbench import conf_packages
+from brdfbench.hydra import packages as conf_packages
 
 SMOKE = ["dataset.params.size=small", "harness=quick", "limit=1"]
 
@@ -94,7 +94,7 @@ def _search_path(primary):
 
 def _entry_points(monkeypatch, *pairs):
     eps = [EntryPoint(name, value, searchpath.ENTRY_POINT_GROUP) for name, value in pairs]
-    # the entry points are listed by brdfbench.conf_packages, which the plugin and the core share
+    # the entry points are listed by brdfbench.hydra.packages, which the plugin and the core share
     monkeypatch.setattr(conf_packages, "entry_points", lambda group: [e for e in eps if e.group == group])
 
 
@@ -190,7 +190,7 @@ def test_editable_install_adds_its_representation(editable_conf_package, tmp_pat
 # A package and its own plugin on PYTHONPATH (no pip)
 
 ACME_SPECS = '''
-from brdfbench.specs import RepresentationSpec
+from brdfbench.plugins.specs import RepresentationSpec
 
 ACME_LAMBERT = RepresentationSpec(
     name="acme_lambert", description="ACME's Lambert (third-party search-path test plugin)",

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from brdfbench.store import ResultsStore
+from brdfbench.store.sqlite import ResultsStore
 
 SMALL = ["dataset.params.size=small", "harness=quick", "progress=lines"]
 
@@ -61,7 +61,7 @@ def test_bad_values_are_named_with_what_they_take(tmp_path, override, match):
     from hydra import compose, initialize_config_module
 
     from brdfbench.errors import ConfigError
-    from brdfbench.hydra_app import to_run_config
+    from brdfbench.hydra.app import to_run_config
 
     with initialize_config_module(config_module="brdfbench_conf", version_base="1.3"):
         cfg = compose("config", overrides=["representation=lambert", *SMALL, f"results_dir={tmp_path}", override])

@@ -11,8 +11,8 @@ import pytest
 PLUGIN = '''
 import math
 import torch
-from brdfbench.protocol import Representation
-from brdfbench.specs import RepresentationSpec
+from brdfbench.protocols.representation import Representation
+from brdfbench.plugins.specs import RepresentationSpec
 from brdfbench.state_checks import expect_tensor
 
 

@@ -14,10 +14,10 @@ import pytest
 import torch
 import yaml
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.device import on_host
-from brdfbench.generator_protocol import TrainingData, WeightSet
-from brdfbench.specs import GeneratorSpec
+from brdfbench.protocols.generator import TrainingData, WeightSet
+from brdfbench.plugins.specs import GeneratorSpec
 from brdfbench.testing import check_generator
 from brdfbench.testing.adversarial import adversarial_pairs
 from brdfbench.testing.generators import generator_checks, training_data

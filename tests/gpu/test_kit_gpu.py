@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from brdfbench import registry
-from brdfbench.specs import RepresentationSpec
+from brdfbench.plugins import registry
+from brdfbench.plugins.specs import RepresentationSpec
 from brdfbench.testing import check_representation
 from brdfbench_representations.lambert import Lambert
 

@@ -8,7 +8,7 @@ import torch
 
 from brdfbench.data.synthetic import generate_material
 from brdfbench.nbrdf import network as net
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench.testing import check_representation
 from brdfbench_representations.nbrdf import NBRDF, NaiveMLP
 from brdfbench_representations.nbrdf_fit import Recipe, fit_batched

@@ -7,7 +7,7 @@ import numpy as np
 import torch
 
 from brdfbench.data.synthetic import generate_material
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench_representations.pca import PCA
 
 

@@ -9,11 +9,11 @@ from dataclasses import replace
 import pytest
 import torch
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.pipeline.config import RunConfig, harness_config
 from brdfbench.pipeline.sweep import run_job as run
-from brdfbench.specs import RepresentationSpec
-from brdfbench.store import ResultsStore
+from brdfbench.plugins.specs import RepresentationSpec
+from brdfbench.store.sqlite import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
 ACCURACY = ("l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae")

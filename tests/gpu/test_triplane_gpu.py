@@ -15,7 +15,7 @@ import torch
 import yaml
 
 from brdfbench.data.synthetic import generate_material
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench.testing import check_representation
 from brdfbench_representations import triplane_fit as tf
 from brdfbench_representations import triplane_model as tm

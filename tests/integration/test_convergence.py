@@ -10,14 +10,15 @@ import pandas as pd
 import pytest
 import torch
 
-from brdfbench import mitsuba_env, registry, scenes
+from brdfbench import mitsuba_env, scenes
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
 from brdfbench.harness.convergence import ConvergenceHarness, derive_seed, fit_slope, sampler_label
 from brdfbench.render.simulate import build_simulator
 from brdfbench.report import write_reports
 from brdfbench.pipeline.config import RunConfig, harness_config
 from brdfbench.pipeline.sweep import run_job as run
-from brdfbench.store import ResultsStore
+from brdfbench.store.sqlite import ResultsStore
 from brdfbench_leaderboard import markdown
 from brdfbench_representations.analytic import GGX
 from brdfbench_representations.lambert import Lambert
@@ -204,7 +205,7 @@ def test_bad_convergence_config_names_the_key_before_any_work(tmp_path, syntheti
 def test_the_packaged_config_composes_with_sampler_parameters():
     from hydra import compose, initialize_config_module
 
-    from brdfbench.hydra_app import to_run_config
+    from brdfbench.hydra.app import to_run_config
 
     base = ["harness=convergence", "scene=sphere_envmap", "representation=ggx", "limit=2"]
     with initialize_config_module(config_module="brdfbench_conf", version_base="1.3"):

@@ -10,13 +10,13 @@ import pytest
 import torch
 
 from brdfbench import device as devices
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
 from brdfbench.pipeline.plan import check, config_hash, hashed_config
 from brdfbench.pipeline.config import RunConfig, harness_config
 from brdfbench.pipeline.sweep import run_job as run
-from brdfbench.specs import RepresentationSpec
-from brdfbench.store import ResultsStore
+from brdfbench.plugins.specs import RepresentationSpec
+from brdfbench.store.sqlite import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
 QUICK = harness_config(n_random=1024, throughput_batch=256, timeout_s=120)

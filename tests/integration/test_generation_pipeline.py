@@ -8,13 +8,13 @@ import os
 import pytest
 import torch
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
-from brdfbench.generator_protocol import TrainingData
+from brdfbench.protocols.generator import TrainingData
 from brdfbench.pipeline.config import RunConfig, harness_config
 from brdfbench.pipeline.sweep import run_job as run
-from brdfbench.specs import GeneratorSpec
-from brdfbench.store import ResultsStore
+from brdfbench.plugins.specs import GeneratorSpec
+from brdfbench.store.sqlite import ResultsStore
 from brdfbench_generators.samples import TableSamples
 from brdfbench_generators.training_set import TrainingSet
 

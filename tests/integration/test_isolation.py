@@ -14,7 +14,7 @@ import torch
 
 from brdfbench.pipeline.config import RunConfig, harness_config
 from brdfbench.pipeline.sweep import run_job as run
-from brdfbench.store import ResultsStore
+from brdfbench.store.sqlite import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
 QUICK = harness_config(n_random=1024, throughput_batch=256, timeout_s=60)

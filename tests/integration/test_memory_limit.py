@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
 from brdfbench.pipeline.config import harness_config
 from brdfbench.pipeline.memory import format_size, parse_size, process_rss
@@ -23,7 +23,7 @@ from brdfbench.pipeline.worker import shared_worker
 from brdfbench.provenance import config_hash
 from brdfbench.pipeline.config import RunConfig
 from brdfbench.pipeline.sweep import run_job as run
-from brdfbench.store import ResultsStore
+from brdfbench.store.sqlite import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
 MiB, GiB = 2**20, 2**30

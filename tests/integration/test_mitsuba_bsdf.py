@@ -15,10 +15,11 @@ import pytest
 import torch
 from brdfbench_representations.lambert import Lambert
 
-from brdfbench import mitsuba_env, modelio, registry
+from brdfbench import mitsuba_env, modelio
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError, ModelFileError, RenderError
 from brdfbench.sampling.builtin import Cosine
-from brdfbench.specs import RepresentationSpec, SamplerSpec
+from brdfbench.plugins.specs import RepresentationSpec, SamplerSpec
 from brdfbench.testing.kit import reference_material
 
 pytestmark = pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="llvm_ad_rgb needs libLLVM >= 19")

@@ -13,7 +13,7 @@ import torch
 import brdfbench as bb
 from brdfbench.data.synthetic import generate_material
 from brdfbench.errors import ConfigError
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench_representations.nbrdf import NBRDF, NaiveMLP
 from brdfbench_representations.nbrdf_fit import COLLAPSE_RATIO
 

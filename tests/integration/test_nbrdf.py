@@ -16,10 +16,10 @@ from brdfbench.errors import ConfigError, ModelFileError
 from brdfbench.nbrdf import network as nw
 from brdfbench.nbrdf.formats import Network, read_network, to_model, write_network
 from brdfbench.nbrdf.network import MAX_LOG_VALUE
-from brdfbench.protocol import FIT_LOSS_KEY, Material
+from brdfbench.protocols.representation import FIT_LOSS_KEY, Material
 from brdfbench.pipeline.config import RunConfig, harness_config
 from brdfbench.pipeline.sweep import run_job as run
-from brdfbench.store import ResultsStore
+from brdfbench.store.sqlite import ResultsStore
 from brdfbench.testing import adversarial_pairs
 from brdfbench_representations.nbrdf import NBRDF, NaiveMLP
 from brdfbench_representations.nbrdf_fit import (

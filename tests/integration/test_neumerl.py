@@ -9,11 +9,11 @@ from itertools import combinations
 import numpy as np
 import pytest
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.data import neumerl as N
 from brdfbench.data.augmerl import augmerl_dataset
 from brdfbench.errors import ConfigError
-from brdfbench.generator_protocol import WeightSet
+from brdfbench.protocols.generator import WeightSet
 from brdfbench.nbrdf.layouts import flatten
 
 #: A short recipe: the tests check bookkeeping and alignment, not fit quality.

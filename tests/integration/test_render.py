@@ -11,7 +11,8 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brdfbench import mitsuba_env, registry, scenes
+from brdfbench import mitsuba_env, scenes
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError, RenderError
 from brdfbench.render import sphere
 from brdfbench.render.camera import Camera
@@ -19,8 +20,8 @@ from brdfbench.render.closed_form import ClosedForm
 from brdfbench.render.simulate import build_simulator
 from brdfbench.pipeline.config import RunConfig, harness_config
 from brdfbench.pipeline.sweep import run_job as run
-from brdfbench.specs import RepresentationSpec
-from brdfbench.store import ResultsStore
+from brdfbench.plugins.specs import RepresentationSpec
+from brdfbench.store.sqlite import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
 needs_llvm = pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="drjit does not load LLVM >= 19 here")

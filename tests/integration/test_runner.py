@@ -9,7 +9,7 @@ from brdfbench.errors import ConfigError
 from brdfbench.report import write_reports
 from brdfbench.pipeline.config import RunConfig, harness_config
 from brdfbench.pipeline.sweep import run_job as run
-from brdfbench.store import ResultsStore
+from brdfbench.store.sqlite import ResultsStore
 from brdfbench_representations.lambert import Lambert
 
 QUICK = harness_config(n_random=4096, throughput_batch=1024)

@@ -16,7 +16,7 @@ import yaml
 from brdfbench import coords, merl
 from brdfbench.data.synthetic import generate_material
 from brdfbench.errors import ConfigError
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench_representations import triplane_fit as tf
 from brdfbench_representations import triplane_model as tm
 from brdfbench_representations.nbrdf_fit import draw_samples

@@ -8,11 +8,12 @@ import gc
 import pytest
 import torch
 
-from brdfbench import merl, registry, reused
+from brdfbench import merl, reused
+from brdfbench.plugins import registry
 from brdfbench.data.synthetic import generate_material
 from brdfbench.harness import directions
 from brdfbench.harness.accuracy import AccuracyGeometry, accuracy_geometry, evaluate_accuracy
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 
 METRICS = ("l1", "l1_log", "l1_log_cos", "hdr_rmse", "hdr_mae")
 N_RANDOM = 2**14

@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 import torch
 
-from brdfbench import merl, registry
+from brdfbench import merl
+from brdfbench.plugins import registry
 from brdfbench.coords import from_half_diff, spherical_to_vector
 from brdfbench.errors import ConfigError, DataError
 from brdfbench.merl import MerlTable
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench.testing import FAMILIES, adversarial_pairs
 from brdfbench_representations.analytic import BlinnPhong, CookTorrance, GGX
 from brdfbench_metrics.functional import l1_log_cos as l1_log_cos_metric

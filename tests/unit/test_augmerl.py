@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from brdfbench import generator_protocol, logrel
+from brdfbench import logrel
+from brdfbench.protocols import generator as generator_protocol
 from brdfbench.data import augmerl as A
 from brdfbench.data import _augmerl_pca as K
 from brdfbench.errors import ConfigError

@@ -278,7 +278,8 @@ def test_display_renders_leave_the_measured_render_and_its_metrics_alone(small_d
     """The measured image and metrics are the measured simulator's (its spp and sampler);
     the display pair is rendered apart, at its own spp with the fitted sampler, and recorded
     with both settings for the report's caption."""
-    from brdfbench import images, registry
+    from brdfbench import images
+    from brdfbench.plugins import registry
     from brdfbench.render.simulate import build_simulator
 
     scene = registry.get("scenes", "sphere_envmap").load()(width=12, height=12, spp=4)

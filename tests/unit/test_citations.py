@@ -11,9 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from brdfbench import citations, cli, registry
+from brdfbench import citations, cli
+from brdfbench.plugins import registry
 from brdfbench.report import write_reports
-from brdfbench.store import ConfigRecord, ResultsStore, Row
+from brdfbench.store.sqlite import ConfigRecord, ResultsStore, Row
 from brdfbench_leaderboard import published
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -3,8 +3,8 @@
 import pytest
 import torch
 
-from brdfbench import registry
-from brdfbench.specs import RepresentationSpec
+from brdfbench.plugins import registry
+from brdfbench.plugins.specs import RepresentationSpec
 from brdfbench.testing import FAMILIES, adversarial_pairs, check_metric, check_representation, representation_checks
 
 CASES = [(name, {}) for name in registry.names("representations")] + [

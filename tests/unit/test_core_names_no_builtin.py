@@ -14,7 +14,7 @@ import ast
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from brdfbench.registry import GROUPS
+from brdfbench.plugins.registry import GROUPS
 
 ROOT = Path(__file__).resolve().parents[2]
 CORE = ROOT / "brdfbench"
@@ -24,7 +24,7 @@ NOT_PLUGINS = {
     ("data/merl_folder.py", "merl"): "the category of materials read from a MERL folder",
     ("data/nbrdf_release.py", "merl"): "the subset of the published NBRDF networks fitted to MERL",
     ("data/synthetic.py", "sgd"): "the lobe shape of a synthetic material (Bagher et al.'s SGD distribution)",
-    ("generator_protocol.py", "nbrdf"): "what a generator learns from: aligned NBRDF weight vectors",
+    ("protocols/generator.py", "nbrdf"): "what a generator learns from: aligned NBRDF weight vectors",
 }
 
 

@@ -11,14 +11,14 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.data import Dataset
 from brdfbench.errors import DataError
-from brdfbench.generator_protocol import WeightSet
+from brdfbench.protocols.generator import WeightSet
 from brdfbench.merl import SHAPE, MerlTable
 from brdfbench.nbrdf.network import n_weights
-from brdfbench.protocol import Material
-from brdfbench.specs import DatasetSpec
+from brdfbench.protocols.representation import Material
+from brdfbench.plugins.specs import DatasetSpec
 from brdfbench.testing import check_dataset
 
 ALBEDOS = {"grey": (0.5, 0.5, 0.5), "red": (0.6, 0.1, 0.1), "blue": (0.1, 0.1, 0.6)}

@@ -95,9 +95,9 @@ def test_chosen_cells_on_the_torch_path(sets):
 
 
 def test_representation_tensor_and_file_members_on_the_torch_path(tmp_path):
-    from brdfbench import registry
+    from brdfbench.plugins import registry
     from brdfbench.data.synthetic import generate_material
-    from brdfbench.protocol import Material
+    from brdfbench.protocols.representation import Material
 
     materials = [Material(name, table, category) for name, category, table in
                  (generate_material(i, seed=0) for i in range(3))]
@@ -268,9 +268,9 @@ def test_samples_off_the_cpu_are_placed_evaluated_and_rendered_on_the_cpu():
 
 
 def test_grid_values_on_the_cpu_are_the_models_own():
-    from brdfbench import registry
+    from brdfbench.plugins import registry
     from brdfbench.data.synthetic import generate_material
-    from brdfbench.protocol import Material
+    from brdfbench.protocols.representation import Material
     from brdfbench_generators.harness import grid_values
 
     name, category, table = generate_material(0, seed=0)

@@ -262,7 +262,7 @@ def test_a_memory_mapped_merl_file_reads_as_its_table(tmp_path):
 
 
 def test_a_representation_evaluated_at_the_cell_centres_is_its_table():
-    from brdfbench import registry
+    from brdfbench.plugins import registry
     from brdfbench.data.synthetic import synthetic_dataset
 
     material = next(iter(synthetic_dataset("small", seed=0)))

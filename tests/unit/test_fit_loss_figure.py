@@ -7,7 +7,8 @@ import math
 
 import pytest
 
-from brdfbench import api, registry
+from brdfbench import api
+from brdfbench.plugins import registry
 from brdfbench.harness.cost import fit_loss
 from brdfbench.testing.kit import reference_material
 

@@ -13,7 +13,7 @@ from scipy import stats
 from brdfbench import merl
 from brdfbench.errors import ConfigError
 from brdfbench.merl import MerlTable
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench_representations.analytic import GGX, BlinnPhong
 from brdfbench_representations.fit_losses import FIT_LOSSES, LOSSES, sample_pairs
 from brdfbench_representations.fitting import prepare

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from brdfbench.store import ConfigRecord, ResultsStore, Row
+from brdfbench.store.sqlite import ConfigRecord, ResultsStore, Row
 from brdfbench_leaderboard import generation_render, markdown, view
 from brdfbench_leaderboard.generation_view import GenerationSection, draw_cell
 

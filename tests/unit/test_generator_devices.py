@@ -14,10 +14,10 @@ import torch
 import yaml
 
 from brdfbench import device as devices
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
-from brdfbench.generator_protocol import Generator, TrainingData
-from brdfbench.specs import GeneratorSpec
+from brdfbench.protocols.generator import Generator, TrainingData
+from brdfbench.plugins.specs import GeneratorSpec
 from brdfbench.testing import check_generator
 from brdfbench.testing.generators import generator_checks, training_data
 from brdfbench_generators import hyperdiffusion as hd

@@ -8,10 +8,10 @@ import time
 import pytest
 import torch
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError, ModelFileError
-from brdfbench.generator_protocol import Generator
-from brdfbench.specs import GeneratorSpec
+from brdfbench.protocols.generator import Generator
+from brdfbench.plugins.specs import GeneratorSpec
 from brdfbench.testing import check_generator
 from brdfbench_generators.samples import WeightSamples
 

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from brdfbench import modelio
 from brdfbench.errors import ConfigError, DataError, ModelFileError
-from brdfbench.generator_protocol import TrainingData, WeightSet, seeded_split
+from brdfbench.protocols.generator import TrainingData, WeightSet, seeded_split
 from brdfbench_generators.samples import WeightSamples
 from brdfbench_generators.training_set import TrainingSet
 

@@ -12,7 +12,7 @@ from scipy import stats
 
 from brdfbench import logrel, merl
 from brdfbench.errors import ConfigError, ModelFileError
-from brdfbench.generator_protocol import ResourceError, TrainingData, WeightSet
+from brdfbench.protocols.generator import ResourceError, TrainingData, WeightSet
 from brdfbench.nbrdf.network import n_weights
 from brdfbench.testing.generators import training_data
 from brdfbench_generators import pca, vae

@@ -9,7 +9,7 @@ import pytest
 import yaml
 from hydra import compose, initialize_config_module
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
 from brdfbench.harness import HarnessConfig
 from brdfbench.pipeline import harness_defaults
@@ -22,7 +22,7 @@ CORE_KINDS = [n for n in registry.names("harnesses")
 
 
 def _composed(option: str, *overrides: str):
-    from brdfbench.hydra_config import to_run_config
+    from brdfbench.hydra.jobs import to_run_config
 
     with initialize_config_module(config_module="brdfbench_conf", version_base="1.3"):
         return to_run_config(compose("config", overrides=[f"harness={option}", *overrides])).harness

@@ -12,10 +12,10 @@ from typing import ClassVar
 import pytest
 import torch
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
 from brdfbench.harness import Harness, HarnessConfig, Measurement
-from brdfbench.specs import HarnessSpec
+from brdfbench.plugins.specs import HarnessSpec
 from brdfbench.testing import check_harness, harness_checks
 from brdfbench.testing.harnesses import KitDiffuse, kit_material
 

@@ -20,10 +20,11 @@ import numpy as np
 import pytest
 import torch
 
-from brdfbench import merl, mitsuba_env, registry
+from brdfbench import merl, mitsuba_env
+from brdfbench.plugins import registry
 from brdfbench.coords import from_half_diff, spherical_to_vector
 from brdfbench.merl import MerlTable
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench.testing import FAMILIES, adversarial_pairs, representation_checks
 from brdfbench.testing.kit import reference_material
 from brdfbench_representations.he_model import WAVELENGTHS_UM, He, he_log_series, lambert_w_log

@@ -13,7 +13,7 @@ from scipy.stats import binomtest
 
 from brdfbench import modelio
 from brdfbench.errors import ConfigError, ModelFileError
-from brdfbench.generator_protocol import TrainingData, WeightSet
+from brdfbench.protocols.generator import TrainingData, WeightSet
 from brdfbench.nbrdf.network import n_weights
 from brdfbench.testing import generator_checks
 from brdfbench_generators import hyperdiffusion as hd

@@ -13,7 +13,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import RenderError
 from brdfbench.testing.kit import reference_material
 from brdfbench_metrics import image_distances as D

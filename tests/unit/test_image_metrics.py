@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 from PIL import Image
 from scipy.ndimage import gaussian_filter
 
-from brdfbench import images, registry
+from brdfbench import images
+from brdfbench.plugins import registry
 from brdfbench.errors import DataError
 from brdfbench_metrics import image as IM
 from brdfbench_metrics import image_functional as IF

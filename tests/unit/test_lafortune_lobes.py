@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 import torch
 
-from brdfbench import merl, mitsuba_env, registry
+from brdfbench import merl, mitsuba_env
+from brdfbench.plugins import registry
 from brdfbench.merl import MerlTable
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench.testing import adversarial_pairs
 from brdfbench_representations.lafortune_lobes import MODELS, Lafortune2, Lafortune3
 from brdfbench_representations.ngan_models import Lafortune

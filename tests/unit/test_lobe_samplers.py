@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
 from brdfbench.sampling.builtin import Beckmann, BlinnPhong, PowerCosine
 from brdfbench.sampling.chi2 import Unresolvable, chi2_test, integrate_pdf

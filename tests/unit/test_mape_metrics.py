@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.testing import check_metric
 from brdfbench_metrics import image as IM
 from brdfbench_metrics import image_functional as IF

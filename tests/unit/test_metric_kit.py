@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.cli import main
-from brdfbench.metric_protocol import ImageMetric, Metric, SetMetric
-from brdfbench.specs import MetricSpec
+from brdfbench.protocols.metric import ImageMetric, Metric, SetMetric
+from brdfbench.plugins.specs import MetricSpec
 from brdfbench.testing import check_metric, metric_checks
 
 

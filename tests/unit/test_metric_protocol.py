@@ -8,8 +8,8 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brdfbench import metric_protocol as mp
-from brdfbench import registry
+from brdfbench.protocols import metric as mp
+from brdfbench.plugins import registry
 
 PROTOCOL = {"merl_grid": mp.Metric, "random_pairs": mp.Metric, "image": mp.ImageMetric, "set": mp.SetMetric,
             "image_set": mp.ImageSetMetric}

@@ -5,7 +5,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench_metrics import functional as F
 
 FUNCTIONAL = {"l1": F.l1, "l1_log": F.l1_log, "l1_log_cos": F.l1_log_cos, "hdr_rmse": F.hdr_rmse, "hdr_mae": F.hdr_mae}

@@ -17,7 +17,7 @@ import torch
 from brdfbench import merl, mitsuba_env
 from brdfbench.coords import from_half_diff, spherical_to_vector
 from brdfbench.merl import MerlTable
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench.testing import adversarial_pairs
 from brdfbench_representations import microfacet_models as mm
 from brdfbench_representations.analytic_terms import geometry

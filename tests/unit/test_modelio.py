@@ -81,7 +81,7 @@ def relabel(path, tensors, **header):
 
 @pytest.fixture
 def ggx_file(tmp_path):
-    from brdfbench import registry
+    from brdfbench.plugins import registry
 
     model = registry.get("representations", "ggx").create()
     return modelio.save(model, "ggx", tmp_path / "ggx.safetensors"), model

@@ -17,7 +17,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from brdfbench import merl, modelio, registry
+from brdfbench import merl, modelio
+from brdfbench.plugins import registry
 from brdfbench.nbrdf import formats as nf
 from brdfbench.nbrdf import network as nw
 from brdfbench.nbrdf.keras_h5 import layout, read_nbrdf_h5

@@ -18,10 +18,11 @@ import pytest
 import torch
 
 import brdfbench_representations
-from brdfbench import merl, mitsuba_env, registry
+from brdfbench import merl, mitsuba_env
+from brdfbench.plugins import registry
 from brdfbench.coords import from_half_diff, spherical_to_vector
 from brdfbench.merl import MerlTable
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench.testing import FAMILIES, adversarial_pairs, representation_checks
 from brdfbench_representations.ngan_models import (MODELS, AshikhminShirley, AshikhminShirleyIor, BlinnPhongNgan,
                                                    Lafortune, Phong, Ward, WardDuer)

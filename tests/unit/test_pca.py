@@ -10,8 +10,8 @@ import torch
 from brdfbench import merl, modelio
 from brdfbench.errors import ConfigError, DataError, ModelFileError
 from brdfbench.harness.accuracy import evaluate_accuracy
-from brdfbench.protocol import Material
-from brdfbench.registry import get
+from brdfbench.protocols.representation import Material
+from brdfbench.plugins.registry import get
 from brdfbench.pipeline.plan import plan_folds
 from brdfbench.testing.kit import reference_material, training_materials
 from brdfbench_representations.pca import PCA, _domain

@@ -46,10 +46,10 @@ from typing import Any, Callable
 import pytest
 from omegaconf import OmegaConf
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.pipeline.config import harness_class, harness_config
 from brdfbench.pipeline.harness_defaults import unset_nulls
-from brdfbench.specs import import_target
+from brdfbench.plugins.specs import import_target
 
 REPO = Path(__file__).resolve().parents[2]
 CONF = REPO / "conf"

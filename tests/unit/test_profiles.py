@@ -7,7 +7,7 @@ import pytest
 from hydra import compose, initialize_config_module
 from omegaconf import OmegaConf
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.data.synthetic import CATEGORIES, synthetic_dataset
 from hydra_plugins.brdfbench_sweeper import job_overrides
 

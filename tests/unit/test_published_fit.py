@@ -12,7 +12,7 @@ import torch
 
 from brdfbench import merl, modelio
 from brdfbench.errors import ConfigError
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench.testing import adversarial_pairs
 from brdfbench.testing.kit import reference_material
 from brdfbench_representations.published import (NOT_IMPLEMENTED, NoPublishedFit, PublishedFit, load_source, published_forms,

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from brdfbench.store import ConfigRecord, ResultsStore, Row
+from brdfbench.store.sqlite import ConfigRecord, ResultsStore, Row
 from brdfbench_leaderboard import html, markdown, published, published_fits_render, view
 from brdfbench_leaderboard.published_data import representation_spec
 from brdfbench_leaderboard.published_fits_view import build

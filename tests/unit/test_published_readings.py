@@ -14,8 +14,8 @@ import torch
 from brdfbench import modelio
 from brdfbench.errors import ConfigError
 from brdfbench.merl import MerlTable
-from brdfbench.protocol import Material
-from brdfbench.store import ConfigRecord, ResultsStore, Row
+from brdfbench.protocols.representation import Material
+from brdfbench.store.sqlite import ConfigRecord, ResultsStore, Row
 from brdfbench_leaderboard.published_fits_view import build
 from brdfbench_representations.ngan_models import BlinnPhongNgan, Phong
 from brdfbench_representations.published import (PublishedFit, load_source, published_forms, published_readings,

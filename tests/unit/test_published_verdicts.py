@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from brdfbench.store import ConfigRecord, ResultsStore, Row
+from brdfbench.store.sqlite import ConfigRecord, ResultsStore, Row
 from brdfbench_leaderboard import published, published_render, view
 from brdfbench_leaderboard.published_markdown import published_markdown
 

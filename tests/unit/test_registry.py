@@ -1,8 +1,8 @@
 import pytest
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import PluginError
-from brdfbench.specs import MetricSpec, RepresentationSpec
+from brdfbench.plugins.specs import MetricSpec, RepresentationSpec
 
 
 def test_builtins_are_registered_through_entry_points():
@@ -65,7 +65,7 @@ def test_listing_imports_no_implementation():
     import sys
 
     code = (
-        "import sys; from brdfbench import registry\n"
+        "import sys; from brdfbench.plugins import registry\n"
         "[registry.get(g, n) for g in registry.GROUPS for n in registry.names(g)]\n"
         "heavy = [m for m in ('brdfbench_representations.merl', 'brdfbench_representations.lambert', 'torch') if m in sys.modules]\n"
         "print(heavy)"

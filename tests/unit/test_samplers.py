@@ -11,7 +11,8 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from brdfbench import mitsuba_env, registry
+from brdfbench import mitsuba_env
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
 from brdfbench.sampling import Sampler, cartesian_to_spherical, reflect, spherical_to_cartesian
 from brdfbench.sampling import chi2 as chi2_mod
@@ -19,7 +20,7 @@ from brdfbench.sampling.builtin import GGX, Beckmann, PowerCosine
 from brdfbench.sampling.charts import HalfVectorChart, LobeZoom
 from brdfbench.sampling.chi2 import Unresolvable, chi2_test, integrate_pdf
 from brdfbench.sampling.cubature import tabulate_expected
-from brdfbench.specs import SamplerSpec
+from brdfbench.plugins.specs import SamplerSpec
 from brdfbench.testing.samplers import chi2_cells, check_sampler, sampler_checks
 
 NAMES = registry.names("samplers")

@@ -17,8 +17,9 @@ import brdfbench_representations
 from brdfbench import merl, mitsuba_env
 from brdfbench.coords import from_half_diff, spherical_to_vector
 from brdfbench.merl import MerlTable
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench.testing import adversarial_pairs
+from brdfbench_representations import fitting
 from brdfbench_representations.sgd import COEFFS_SHAPE, SGD
 
 F64 = torch.float64
@@ -421,15 +422,19 @@ def test_init_shape_matches_the_ggx_half_width(alpha):
     assert p22[1] / p22[0] == pytest.approx(0.5, rel=1e-9)
 
 
-def test_fit_recovers_a_rendered_table():
+def test_fit_recovers_a_rendered_table(monkeypatch):
+    # The shipped refinement budget stops short of the truth, at a point that moves with
+    # scipy's L-BFGS-B (1.17 stops elsewhere than earlier releases): recovery is asked of a
+    # refinement long enough to converge.
+    monkeypatch.setattr(fitting, "MAX_ITER", 1000)
     truth = coeffs(alpha=0.03, p=0.5, f0=0.3, f1=-0.7, lam=2.5, theta0=0.25, k=15.0)
     wi, wo = merl.grid_directions()
     values = model(**truth).eval(wi, wo).T.reshape(3, *merl.SHAPE).numpy()
     valid = ((wi[:, 2] > 0) & (wo[:, 2] > 0)).numpy().reshape(merl.SHAPE)
     target = Material("self-sgd", MerlTable.from_values(values, valid), "synthetic-self")
     fitted = SGD(n_samples=4096, restarts=1).fit(target, seed=0)
-    # 39 coefficients, three of them degenerate with k_s (K_ap, and F's scale): the fit stops
-    # at its iteration limit near, not at, the truth (a Lambertian fit scores 0.50 here).
+    # 39 coefficients, three of them degenerate with k_s (K_ap, and F's scale); a Lambertian
+    # fit scores 0.50 here.
     assert fitted.fit_loss < 1e-2, (fitted.fit_loss, fitted.coeffs)
     torch.testing.assert_close(fitted.kd, torch.tensor(truth["kd"], dtype=F64), rtol=0.05, atol=2e-3)
     assert fitted.metadata()["n_fit_cells"] == 4096

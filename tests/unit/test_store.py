@@ -7,7 +7,7 @@ import sqlite3
 import pytest
 
 from brdfbench.errors import DataError
-from brdfbench.store import SCHEMA_VERSION, ConfigRecord, ResultsStore, Row
+from brdfbench.store.sqlite import SCHEMA_VERSION, ConfigRecord, ResultsStore, Row
 
 
 def _row(material="m1", metric="l1", value=1.0, status="ok", chash="h1", spp=0):

@@ -4,7 +4,7 @@ import sqlite3
 
 import pytest
 
-from brdfbench.store import SCHEMA_VERSION, ResultsStore
+from brdfbench.store.sqlite import SCHEMA_VERSION, ResultsStore
 from brdfbench_leaderboard import markdown
 
 #: The v1 DDL, as v1's store.py created it (the `scene` column was added by ALTER TABLE in
@@ -188,7 +188,7 @@ def test_a_v3_store_gains_the_device_columns_and_loses_nothing(tmp_path):
     assert [r[:22] for r in before] == written
     # every figure of a v3 store was computed on the CPU
     assert [(e.env_id, e.device, e.device_detail) for e in store.environments()] == [("e1", "cpu", "cpu")]
-    from brdfbench.store_protocol import Environment
+    from brdfbench.store.protocol import Environment
 
     gpu = Environment("e2", "host", "cpu", 16, 16, "basic", "linux", "cuda:0", "NVIDIA H200, 139.8 GiB")
     store.write_environment(gpu)

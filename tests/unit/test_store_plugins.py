@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
-from brdfbench import registry
+from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError, DataError, PluginError
-from brdfbench.specs import StoreSpec
-from brdfbench.store import ResultsStore, sqlite_store
-from brdfbench.store_protocol import ConfigRecord, Environment, Row, Store, merge, open_store
+from brdfbench.plugins.specs import StoreSpec
+from brdfbench.store.sqlite import ResultsStore, sqlite_store
+from brdfbench.store.protocol import ConfigRecord, Environment, Row, Store, merge, open_store
 
 
 def _row(material="m1", metric="l1", value=1.0, status="ok", chash="h1", env="e1"):
@@ -50,7 +50,7 @@ def test_the_sqlite_store_is_a_registered_plugin(tmp_path):
 def test_a_plugin_that_returns_no_store_is_refused(tmp_path):
     registry.register("stores", StoreSpec(name="not_a_store", description="test", target="builtins:str"))
     try:
-        with pytest.raises(ConfigError, match="returned a str, not a brdfbench.store_protocol.Store"):
+        with pytest.raises(ConfigError, match="returned a str, not a brdfbench.store.protocol.Store"):
             open_store("not_a_store", tmp_path)
     finally:
         registry.unregister("stores", "not_a_store")

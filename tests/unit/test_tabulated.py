@@ -6,7 +6,7 @@ import torch
 
 from brdfbench import merl
 from brdfbench.errors import ConfigError
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench_representations.merl import DENSITIES, TabulatedMERL, block_samples
 
 

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from brdfbench import flops, modelio
 from brdfbench.errors import ConfigError, ModelFileError
-from brdfbench.protocol import Material
+from brdfbench.protocols.representation import Material
 from brdfbench_representations import triplane_fit as tf
 from brdfbench_representations import triplane_model as tm
 from brdfbench_representations.triplane import Tripleplane, TriplaneGated

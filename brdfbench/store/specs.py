@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from .specs import StoreSpec
+from ..plugins.specs import StoreSpec
 
 SQLITE = StoreSpec(
     name="sqlite",
     description="one SQLite file in the results folder (WAL): safe for many processes on one host",
-    target="brdfbench.store:sqlite_store",
+    target="brdfbench.store.sqlite:sqlite_store",
 )

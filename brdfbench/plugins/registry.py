@@ -12,7 +12,7 @@ import difflib
 from functools import lru_cache
 from importlib.metadata import EntryPoint, entry_points
 
-from .errors import PluginError
+from ..errors import PluginError
 from .specs import (DatasetSpec, GeneratorSpec, HarnessSpec, MetricSpec, PluginSpec, ReportSpec, RepresentationSpec,
                     SamplerSpec, SceneSpec, StoreSpec)
 

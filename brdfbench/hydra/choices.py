@@ -17,7 +17,7 @@ from __future__ import annotations
 import difflib
 import re
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 
 def _suggest(value: str, options, what: str = "") -> str:

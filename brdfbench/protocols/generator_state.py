@@ -15,10 +15,10 @@ from typing import Any
 
 import torch
 
-from .errors import ConfigError, ModelFileError
-from .generator_protocol import WeightSet
-from .nbrdf.layouts import check_hidden
-from .nbrdf.network import FEATURES, n_weights
+from ..errors import ConfigError, ModelFileError
+from .generator import WeightSet
+from ..nbrdf.layouts import check_hidden
+from ..nbrdf.network import FEATURES, n_weights
 
 #: The keys of a saved NBRDF layout.
 LAYOUT_KEYS = ("hidden", "features", "raw_units", "width")

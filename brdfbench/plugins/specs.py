@@ -12,7 +12,7 @@ import importlib
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from .errors import PluginError
+from ..errors import PluginError
 
 
 def import_target(target: str) -> Any:
@@ -45,7 +45,7 @@ class PluginSpec:
 
 @dataclass(frozen=True)
 class RepresentationSpec(PluginSpec):
-    """A BRDF representation; `target` is a `brdfbench.protocol.Representation` subclass."""
+    """A BRDF representation; `target` is a `brdfbench.protocols.representation.Representation` subclass."""
 
     #: constructor arguments of the conformance kit's quick run (e.g. a short training recipe),
     #: so that it fits in seconds; the kit's full run uses the representation's defaults.
@@ -73,7 +73,7 @@ class RepresentationSpec(PluginSpec):
 @dataclass(frozen=True)
 class GeneratorSpec(PluginSpec):
     """A material generator (PCA, VAE, hyperdiffusion, ...); `target` is a
-    `brdfbench.generator_protocol.Generator` subclass."""
+    `brdfbench.protocols.generator.Generator` subclass."""
 
     #: what it learns from: "tables" (MERL tables) or "nbrdf" (aligned NBRDF weight
     #: vectors): checked against the dataset before any work, without importing the plugin
@@ -96,7 +96,7 @@ class DatasetSpec(PluginSpec):
 
 @dataclass(frozen=True)
 class MetricSpec(PluginSpec):
-    """A metric; `target` is a class implementing one of `brdfbench.metric_protocol`'s
+    """A metric; `target` is a class implementing one of `brdfbench.protocols.metric`'s
     protocols (`Metric`, `ImageMetric`, `SetMetric`, `ImageSetMetric`), by its `domain`."""
 
     unit: str = ""
@@ -128,7 +128,7 @@ class ReportSpec(PluginSpec):
 @dataclass(frozen=True)
 class StoreSpec(PluginSpec):
     """A results store backend; `target(results_dir, create=True, **params)` returns a
-    `brdfbench.store_protocol.Store` (see that module for the contract)."""
+    `brdfbench.store.protocol.Store` (see that module for the contract)."""
 
 
 @dataclass(frozen=True)

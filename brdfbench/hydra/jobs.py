@@ -10,10 +10,10 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from . import parallelism
-from .errors import ConfigError
-from .pipeline.config import RunConfig, harness_config
-from .pipeline.harness_defaults import unset_nulls
+from .. import parallelism
+from ..errors import ConfigError
+from ..pipeline.config import RunConfig, harness_config
+from ..pipeline.harness_defaults import unset_nulls
 
 JOB_SUMMARY = "brdfbench_job.json"
 #: Summaries of the jobs run in this process, so the end of the sweep has them even where a
@@ -134,8 +134,8 @@ def _launcher(choices: dict) -> str:
 def write_summary(folder: Path, summary: dict[str, Any]) -> None:
     """Keep the job's summary (in memory, and in its Hydra folder for other launchers); a
     folder that cannot be written (a full disk) becomes the job's error, not a traceback."""
-    from .atomic import replacing
-    from .errors import os_error
+    from ..atomic import replacing
+    from ..errors import os_error
 
     IN_PROCESS.append(summary)
     try:

@@ -22,9 +22,9 @@ from typing import Any, ClassVar, Iterable, Sequence
 
 import torch
 
-from .coords import above_horizon
-from .device import Placed
-from .merl import MerlTable
+from ..coords import above_horizon
+from ..device import Placed
+from ..merl import MerlTable
 
 
 @dataclass(frozen=True)

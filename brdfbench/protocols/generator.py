@@ -8,7 +8,7 @@ new materials from it (`sample`). What it learns from is declared by `learns_fro
   shared initialisation), as one (N, W) float32 array (`TrainingData.weights()`).
 
 `sample(n, condition=None, seed=...)` returns a `SampleSet`: n samples, each a fitted
-`brdfbench.protocol.Representation` (an NBRDF network, a table) that the rest of the
+`brdfbench.protocols.representation.Representation` (an NBRDF network, a table) that the rest of the
 project evaluates, scores and renders, built lazily so that a set of full tables never
 has to sit in memory at once. Its `array` holds each sample's raw parameters (n, ...),
 which determinism checks compare and the non-finite check reads per sample.
@@ -33,9 +33,9 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 
-from .device import Placed
-from .errors import ConfigError, DataError
-from .protocol import Material, Representation
+from ..device import Placed
+from ..errors import ConfigError, DataError
+from .representation import Material, Representation
 
 LEARNS_FROM = ("tables", "nbrdf")
 #: `metadata()` key of a generator's training curves: {name: [value per epoch]} (e.g.
@@ -59,7 +59,7 @@ class WeightSet:
     raw_units: bool = False
 
     def __post_init__(self):
-        from .nbrdf.network import n_weights
+        from ..nbrdf.network import n_weights
 
         v = self.vectors
         if not isinstance(v, np.ndarray) or v.ndim != 2 or v.shape[0] != len(self.names):

@@ -28,10 +28,10 @@ from typing import Any, Iterator
 
 import pandas as pd
 
-from .errors import DataError
-from .store_migrations import migrate_v1, migrate_v2, migrate_v3
-from .store_protocol import CELL, ConfigRecord, Environment, Row, Store
-from .store_schema import SCHEMA, SCHEMA_VERSION
+from ..errors import DataError
+from .migrations import migrate_v1, migrate_v2, migrate_v3
+from .protocol import CELL, ConfigRecord, Environment, Row, Store
+from .schema import SCHEMA, SCHEMA_VERSION
 
 __all__ = ["CELL", "COLUMNS", "SCHEMA_VERSION", "ConfigRecord", "Environment", "ResultsStore", "Row", "STORE_FILE",
            "sqlite_store"]

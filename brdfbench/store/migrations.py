@@ -24,8 +24,8 @@ import sqlite3
 from collections.abc import Callable
 from pathlib import Path
 
-from .errors import DataError
-from .store_schema import DEVICE_COLUMNS, SCHEMA, SCHEMA_VERSION, UNKNOWN_ENV
+from ..errors import DataError
+from .schema import DEVICE_COLUMNS, SCHEMA, SCHEMA_VERSION, UNKNOWN_ENV
 
 _INFIX = "/convergence/"
 _RUNG = re.compile(r"^(?P<base>.+)@spp=(?P<spp>\d+)$")

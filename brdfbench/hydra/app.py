@@ -1,7 +1,7 @@
 """Hydra entry: the command line checked, Hydra's configs composed, each job handed to the
 pipeline (`brdfbench.pipeline.sweep`).
 
-Every invocation is a Hydra multirun (one job or a sweep): `brdfbench.hydra_callbacks`
+Every invocation is a Hydra multirun (one job or a sweep): `brdfbench.hydra.callbacks`
 checks every job before the first starts and hands the jobs' summaries to the pipeline's
 `finish` at the end. A job records its counts (or its error) in `brdfbench_job.json` in its
 Hydra output folder, so the end of the sweep knows how it went whichever launcher ran it.
@@ -17,11 +17,11 @@ from typing import Any
 import hydra
 from omegaconf import DictConfig
 
-from .errors import BrdfbenchError
-from .hydra_callbacks import SWEEP_ENV, prepared
-from .hydra_choices import check_group_choices, check_words
-from .hydra_config import to_run_config, write_summary
-from .pipeline import sweep
+from ..errors import BrdfbenchError
+from .callbacks import SWEEP_ENV, prepared
+from .choices import check_group_choices, check_words
+from .jobs import to_run_config, write_summary
+from ..pipeline import sweep
 
 __all__ = ["run_hydra", "to_run_config"]
 
@@ -52,8 +52,8 @@ def run_hydra(argv: list[str]) -> int:
     # `brdfbench harness=render scene=sphere_envmap -m representation=merl,nbrdf`.
     flags = [a for a in argv if a in ("-m", "--multirun")]
     try:
-        from .cli_help import SUBCOMMANDS
-        from .hydra_config import TOP_LEVEL
+        from ..cli_help import SUBCOMMANDS
+        from .jobs import TOP_LEVEL
 
         check_words(argv, SUBCOMMANDS, tuple(sorted(TOP_LEVEL)))
         check_group_choices([a for a in argv if not a.startswith("-")])

@@ -1,6 +1,6 @@
 """What the pipeline and the reports need of a results store, whatever holds it.
 
-The built-in backend is one SQLite file per results folder (`brdfbench.store.ResultsStore`,
+The built-in backend is one SQLite file per results folder (`brdfbench.store.sqlite.ResultsStore`,
 plugin `sqlite`). Another backend (a database server for many hosts writing at once, say)
 registers a `StoreSpec` in the `brdfbench.stores` entry-point group whose target, called
 as `target(results_dir, create=True, **params)`, returns a `Store` (with `create=False`
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator
 
-from .store_schema import UNKNOWN_ENV
+from .schema import UNKNOWN_ENV
 
 if TYPE_CHECKING:  # the protocol and its records import no pandas; a backend's frame() does
     import pandas as pd
@@ -140,8 +140,8 @@ def merge(source: Store, into: Store) -> dict[str, int]:
 
 def open_store(name: str, results_dir: str | Path, params: dict[str, Any] | None = None) -> Store:
     """The store plugin `name` (group `stores`) opened for `results_dir`."""
-    from . import registry
-    from .errors import ConfigError
+    from ..plugins import registry
+    from ..errors import ConfigError
 
     factory = registry.get("stores", name).load()
     try:
@@ -150,5 +150,5 @@ def open_store(name: str, results_dir: str | Path, params: dict[str, Any] | None
         raise ConfigError(f"store={name}: bad store_params {params or {}} ({exc})") from None
     if not isinstance(store, Store):
         raise ConfigError(f"store plugin {name!r} returned a {type(store).__name__}, not a "
-                          "brdfbench.store_protocol.Store")
+                          "brdfbench.store.protocol.Store")
     return store

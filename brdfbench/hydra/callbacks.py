@@ -24,12 +24,12 @@ from typing import Any
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
-from . import parallelism
-from .errors import BrdfbenchError
-from .hydra_config import IN_PROCESS, JOB_SUMMARY, to_run_config
-from .pipeline import sweep
-from .pipeline.config import RunConfig
-from .pipeline.plan import Checked
+from .. import parallelism
+from ..errors import BrdfbenchError
+from .jobs import IN_PROCESS, JOB_SUMMARY, to_run_config
+from ..pipeline import sweep
+from ..pipeline.config import RunConfig
+from ..pipeline.plan import Checked
 
 BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"
 #: brdfbench's own: the basic sweeper plus a profile's sections (hydra_plugins/brdfbench_sweeper)
@@ -85,7 +85,7 @@ def compose_jobs(config: DictConfig, config_name: str | None,
     from hydra.core.global_hydra import GlobalHydra
     from hydra.types import RunMode
 
-    from .hydra_choices import compose_error_line
+    from .choices import compose_error_line
 
     loader = GlobalHydra.instance().config_loader()
     hydra_overrides = list(OmegaConf.to_container(config.hydra.overrides.hydra))

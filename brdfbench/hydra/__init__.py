@@ -1,0 +1,1 @@
+"""The Hydra adapter: composes configurations and translates them into typed jobs."""

@@ -1,0 +1,1 @@
+"""Plugin discovery: typed entry-point specs and the lazy registry."""

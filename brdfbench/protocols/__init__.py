@@ -1,0 +1,1 @@
+"""The protocols plugins implement: representation, generator and metric of each domain."""

@@ -1,0 +1,1 @@
+"""The results store: its protocol, schema, migrations and the SQLite backend."""
