@@ -169,7 +169,7 @@ def render(model: Representation, scene: str = "sphere_envmap", *, spp: int | No
     import torch
 
     from .pipeline.config import harness_class
-    from .render.simulate import build_simulator
+    from .render.build import build_simulator
 
     factory = registry.get("scenes", scene).load()
     _checked(factory, scene_params, "scene.params")

@@ -174,7 +174,7 @@ def _subcommand_parser() -> argparse.ArgumentParser:
                    default=None, help="the plugin kind (default: the first of these that has the name)")
     p.add_argument("--pairs", type=int, default=10**6, help="adversarial direction pairs per dtype (default 1e6)")
     p.add_argument("--full", action="store_true",
-                   help="a representation or generator with its default parameters, not its quick check_params; "
+                   help="a representation or generator with its default parameters, not its quick kit_params; "
                         "a sampler over the full chi-square sweep, not the quick one; an image-set metric scored; "
                         "a rendering harness measured, with its full sizes; a dataset's weight vectors read")
     p.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",

@@ -178,7 +178,7 @@ class GenerationHarness(Harness):
     @cached_property
     def simulator(self):
         """One simulator for R and every draw: the same scene, environment and random numbers."""
-        from brdfbench_metrics.image_distances import build_set_simulator
+        from brdfbench.distances.image import build_set_simulator
 
         c = self.config
         return build_set_simulator(c.image_scene, spp=c.image_spp, width=c.image_size, height=c.image_size)
@@ -186,7 +186,7 @@ class GenerationHarness(Harness):
     @cached_property
     def reference_images(self):
         """R's tables rendered on spheres (N, H, W, 3), with the seed every draw's samples share."""
-        from brdfbench_metrics.image_distances import render_with
+        from brdfbench.distances.image import render_with
 
         merl_rep = registry.get("representations", "merl")
         models = [merl_rep.create().fit(self.context.dataset.load(n)) for n in self.test_names]
@@ -220,13 +220,13 @@ class GenerationHarness(Harness):
     @cached_property
     def thresholds(self):
         """Zhou et al.'s category thresholds, the specular ones from K-means on R's maximum reflectance."""
-        from brdfbench_metrics.categories import thresholds
+        from brdfbench.data.categories import thresholds
 
         return thresholds([merl.MerlTable.from_values(v) for v in self.reference_values])
 
     def _category_counts(self, values: list[np.ndarray]) -> list[Measurement]:
         """How many of the draw's samples fall in each of Zhou et al.'s seven categories (they overlap)."""
-        from brdfbench_metrics.categories import count_categories
+        from brdfbench.data.categories import count_categories
 
         counts = count_categories((merl.MerlTable.from_values(v) for v in values), self.thresholds)
         return [Measurement("category_count", float(k), "samples", False, category=name) for name, k in counts.items()]
@@ -236,7 +236,7 @@ class GenerationHarness(Harness):
         a draw needs them (else None), and how many samples were excluded: a non-finite
         parameter, value or render."""
         from brdfbench.errors import RenderError
-        from brdfbench_metrics.image_distances import render_with
+        from brdfbench.distances.image import render_with
 
         from .samples import TableSamples
 
@@ -270,13 +270,13 @@ class GenerationHarness(Harness):
         return keep, (torch.stack(images) if self.renders and images else None), excluded
 
     def _brdf_matrix(self, values: list[np.ndarray], kind: str) -> np.ndarray:
-        from brdfbench_metrics.brdf_distances import distance_matrix
+        from brdfbench.distances.brdf import distance_matrix
 
         return distance_matrix(self.reference_values + values, None, kind, device=self.device)
 
     def _image_metrics(self, images: torch.Tensor) -> list[Measurement]:
         """Set metrics over the image distances, and the image-set metrics (FID), of a draw's renders."""
-        from brdfbench_metrics.image_distances import image_distance_matrix
+        from brdfbench.distances.image import image_distance_matrix
 
         ref = self.reference_images
         out = []

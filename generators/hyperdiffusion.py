@@ -307,7 +307,7 @@ def _choice(key: str, value, options: Sequence) -> Any:
 MAX_GUIDANCE = 100.0
 
 
-def check_params(p: dict[str, Any]) -> dict[str, Any]:
+def checked_params(p: dict[str, Any]) -> dict[str, Any]:
     """The constructor params validated and normalised (JSON-able); ConfigError names the key."""
     out = dict(p)
     out["tokens"] = _choice("tokens", p["tokens"], TOKENISATIONS)
@@ -358,7 +358,7 @@ class HyperDiffusion(Generator):
                  weight_decay: float = 0.0, ema: float = 0.999, ddim_steps: int = 50, eta: float = 0.0,
                  guidance: float = 1.0, condition_on: str | None = None, p_uncond: float = 0.1,
                  prior: str = "matched", hidden: Sequence[int] | None = None, max_cpu_hours: float | None = None):
-        super().__init__(**check_params(dict(
+        super().__init__(**checked_params(dict(
             tokens=tokens, chunk_size=chunk_size, d_model=d_model, layers=layers, heads=heads, epochs=epochs,
             batch_size=batch_size, lr=lr, lr_final=lr_final, weight_decay=weight_decay, ema=ema,
             ddim_steps=ddim_steps, eta=eta, guidance=guidance, condition_on=condition_on, p_uncond=p_uncond,

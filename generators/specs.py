@@ -30,14 +30,14 @@ VAE_BRDF = GeneratorSpec(
                 "PCA reduction of the training tables, nearest upsampling",
     target="brdfbench_generators.vae:VAEBRDF",
     learns_from="tables",
-    check_params={"epochs": 2},
+    kit_params={"epochs": 2},
 )
 VAE_NBRDF = GeneratorSpec(
     name="vae_nbrdf",
     description="VAE-N (Zhou et al.): MLP encoder/decoder over aligned NBRDF weight vectors, latent 100",
     target="brdfbench_generators.vae:VAENBRDF",
     learns_from="nbrdf",
-    check_params={"epochs": 20},
+    kit_params={"epochs": 20},
 )
 HYPERDIFFUSION = GeneratorSpec(
     name="hyperdiffusion",
@@ -45,7 +45,7 @@ HYPERDIFFUSION = GeneratorSpec(
     target="brdfbench_generators.hyperdiffusion:HyperDiffusion",
     learns_from="nbrdf",
     tags=frozenset({"conditional"}),
-    check_params={"epochs": 5},
+    kit_params={"epochs": 5},
 )
 
 # The generation harness lives beside the generators, registered as any harness plugin.

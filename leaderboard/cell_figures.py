@@ -193,7 +193,7 @@ def error_maps(results_dir: Path, image_exr: Path, reference_exr: Path, stem: st
     import torch
 
     from brdfbench.images import read_exr
-    from brdfbench_metrics.image_functional import flip
+    from brdfbench.distances.image_functional import flip
 
     folder = Path(results_dir) / FOLDER
     flip_png, rel_png = folder / f"{stem}.flip.png", folder / f"{stem}.relerr.png"

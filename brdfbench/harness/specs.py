@@ -12,10 +12,10 @@ ACCURACY = HarnessSpec(
 RENDER = HarnessSpec(
     name="render",
     description="Image space: renders against the table's render through the cheapest exact simulator (PSNR, SSIM, FLIP, RMSE)",
-    target="brdfbench.harness.render:ImageHarness",
+    target="brdfbench.harness.render:RenderHarness",
 )
 CONVERGENCE = HarnessSpec(
     name="convergence",
     description="Monte Carlo error against spp of a model's own renders, per importance sampler",
-    target="brdfbench.harness.convergence:ConvergenceHarnessPlugin",
+    target="brdfbench.harness.convergence:ConvergenceHarness",
 )

@@ -49,7 +49,7 @@ class RepresentationSpec(PluginSpec):
 
     #: constructor arguments of the conformance kit's quick run (e.g. a short training recipe),
     #: so that it fits in seconds; the kit's full run uses the representation's defaults.
-    check_params: Mapping[str, Any] = field(default_factory=dict)
+    kit_params: Mapping[str, Any] = field(default_factory=dict)
     #: the parameters under which this representation is the target itself (an oracle, e.g.
     #: a table read back cell by cell): reports show such a configuration apart, never ranked;
     #: a key a configuration leaves out takes the value given here. None: never the target.
@@ -80,7 +80,7 @@ class GeneratorSpec(PluginSpec):
     learns_from: str = "tables"
     #: constructor arguments of the conformance kit's quick run (a short training), so that
     #: `check_generator` takes seconds; the full run uses the generator's defaults
-    check_params: Mapping[str, Any] = field(default_factory=dict)
+    kit_params: Mapping[str, Any] = field(default_factory=dict)
 
     def create(self, **params: Any):
         return self.load()(**params)

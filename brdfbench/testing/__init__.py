@@ -13,7 +13,7 @@ In pytest, one test per check:
 
 Capability tags on the spec select the checks (`fittable`, `reciprocal`, `isotropic`);
 a spec's `xfail_checks` maps a check name to the reason it is expected to fail, and its
-`check_params` are the constructor arguments of the default, quick run (a short fit, say);
+`kit_params` are the constructor arguments of the default, quick run (a short fit, say);
 `full=True` (`brdfbench check NAME --full`) checks the representation's defaults.
 
 Every other plugin kind has a kit of its own, each returning a `ConformanceReport`:

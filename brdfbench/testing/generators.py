@@ -10,7 +10,7 @@ are aligned) and checks: the protocol, sample shapes and dtypes, determinism per
 that every sample is finite and evaluates finite and non-negative on the adversarial
 direction pairs, a save/load round trip without pickle, clear errors for n ≤ 0 and for a
 sample set larger than memory (refused before allocating), a fit that depends on its seed
-alone, and declared costs. A spec's `check_params` make the quick run; `full=True` uses
+alone, and declared costs. A spec's `kit_params` make the quick run; `full=True` uses
 the generator's defaults.
 
 Devices (`brdfbench.device.Placed`), for a generator that takes part in them (declares
@@ -305,7 +305,7 @@ def _resolve(spec_or_name) -> GeneratorSpec:
 
 
 def kit_params(spec: GeneratorSpec, params: dict | None = None, full: bool = False) -> dict:
-    quick = {} if full else dict(spec.check_params)
+    quick = {} if full else dict(spec.kit_params)
     return {**quick, **(params or {})}
 
 

@@ -59,10 +59,10 @@ def _checks(kind: str, name: str, n_pairs: int, full: bool) -> tuple[list[Check]
         from .datasets import dataset_checks
 
         return dataset_checks(name, full=full), {}
-    from .kit import _resolve, check_params, representation_checks
+    from .kit import _resolve, kit_params, representation_checks
 
     spec = _resolve(name)
-    return representation_checks(spec, n_pairs=n_pairs, full=full), check_params(spec, full=full)
+    return representation_checks(spec, n_pairs=n_pairs, full=full), kit_params(spec, full=full)
 
 
 def check_isolated(kind: str, name: str, *, n_pairs: int = DEFAULT_PAIRS, full: bool = False,

@@ -394,19 +394,19 @@ def _resolve(spec_or_name: RepresentationSpec | str) -> RepresentationSpec:
     return registry.get("representations", spec_or_name)
 
 
-def check_params(spec: RepresentationSpec, params: dict | None = None, full: bool = False) -> dict:
-    """The constructor arguments the kit uses: the spec's quick `check_params` unless `full`,
+def kit_params(spec: RepresentationSpec, params: dict | None = None, full: bool = False) -> dict:
+    """The constructor arguments the kit uses: the spec's quick `kit_params` unless `full`,
     overridden by `params`."""
-    quick = {} if full else dict(getattr(spec, "check_params", {}))
+    quick = {} if full else dict(getattr(spec, "kit_params", {}))
     return {**quick, **(params or {})}
 
 
 def representation_checks(spec_or_name, *, params: dict | None = None, n_pairs: int = DEFAULT_PAIRS,
                           full: bool = False) -> list[Check]:
     """The checks that apply to a representation, sharing one fitted model between them; see
-    `check_params` for what `params` and `full` select."""
+    `kit_params` for what `params` and `full` select."""
     spec = _resolve(spec_or_name)
-    ctx = Context(spec, check_params(spec, params, full), n_pairs)
+    ctx = Context(spec, kit_params(spec, params, full), n_pairs)
     on_gpu = "cuda" in getattr(spec.load(), "devices", ())
     return [
         Check(spec.name, name, (lambda fn=fn: fn(ctx)), spec.xfail_checks.get(name))
@@ -419,7 +419,7 @@ def check_representation(spec_or_name, *, params: dict | None = None, n_pairs: i
                          full: bool = False) -> ConformanceReport:
     """Run every applicable check; failures are collected, not raised (see raise_on_failure)."""
     spec = _resolve(spec_or_name)
-    report = ConformanceReport(spec.name, params=check_params(spec, params, full))
+    report = ConformanceReport(spec.name, params=kit_params(spec, params, full))
     for c in representation_checks(spec, params=params, n_pairs=n_pairs, full=full):
         report.run(c)
     return report

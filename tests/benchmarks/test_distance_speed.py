@@ -22,7 +22,7 @@ import pytest
 import torch
 
 from brdfbench.data.synthetic import generate_material
-from brdfbench_metrics import brdf_distances
+from brdfbench.distances import brdf as brdf_distances
 
 N = int(os.environ.get("BRDFBENCH_DISTANCE_N", "24"))
 

@@ -20,7 +20,7 @@ import torch
 
 from brdfbench.plugins import registry
 from brdfbench_metrics import fid as FD
-from brdfbench_metrics import image_distances as D
+from brdfbench.distances import image as D
 
 N_RENDER, N_MATRIX, N_FID = 24, 240, 120
 

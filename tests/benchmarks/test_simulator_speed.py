@@ -20,7 +20,7 @@ import pytest
 
 from brdfbench import mitsuba_env, scenes
 from brdfbench.harness.render import TableReference
-from brdfbench.render.simulate import build_simulator
+from brdfbench.render.build import build_simulator
 
 pytestmark = pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="the Mitsuba backends need libLLVM >= 19")
 SIZE = 256

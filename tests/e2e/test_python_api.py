@@ -84,9 +84,9 @@ def test_import_brdfbench_stays_light_and_lists_the_api():
 
 def test_render_is_the_subpackage_and_the_call():
     from brdfbench import api
-    from brdfbench.render import simulate
+    from brdfbench.render import build
 
-    assert bb.render.simulate is simulate and callable(bb.render)
+    assert bb.render.build is build and callable(bb.render)
     assert bb.evaluate is api.evaluate and bb.Scores is api.Scores
     with pytest.raises(AttributeError, match="no attribute 'nonesuch'"):
         bb.nonesuch  # noqa: B018
@@ -171,7 +171,7 @@ def test_evaluate_errors_name_the_metric_or_key(model, material):
 
 def test_render_goes_through_the_harness_simulator(model):
     from brdfbench.plugins import registry
-    from brdfbench.render.simulate import build_simulator
+    from brdfbench.render.build import build_simulator
 
     image = bb.render(model, "sphere_envmap", width=16, height=12, spp=4, backend="torch")
     assert image.dtype == torch.float32 and image.shape == (12, 16, 3)

@@ -13,10 +13,10 @@ import torch
 from brdfbench import merl
 from brdfbench.nbrdf import layouts
 from brdfbench.nbrdf import network as net
-from brdfbench_metrics import brdf_distances as BD
+from brdfbench.distances import brdf as BD
 from brdfbench_metrics import fid as FD
-from brdfbench_metrics import image_distances as ID
-from brdfbench_metrics import image_functional as IF
+from brdfbench.distances import image as ID
+from brdfbench.distances import image_functional as IF
 
 #: The torch path sums in another order than numba: fp64 rounding, about 1e-14.
 REL = 1e-12

@@ -13,8 +13,8 @@ import torch
 from brdfbench import mitsuba_env, scenes
 from brdfbench.plugins import registry
 from brdfbench.errors import ConfigError
-from brdfbench.harness.convergence import ConvergenceHarness, derive_seed, fit_slope, sampler_label
-from brdfbench.render.simulate import build_simulator
+from brdfbench.harness.convergence import ConvergenceLadder, derive_seed, fit_slope, sampler_label
+from brdfbench.render.build import build_simulator
 from brdfbench.report import write_reports
 from brdfbench.pipeline.config import RunConfig, harness_config
 from brdfbench.pipeline.sweep import run_job as run
@@ -34,7 +34,7 @@ def _harness(tmp_path, sampler="cosine", params=None, *, backend="torch", ladder
     scene = scenes.sphere_envmap(width=width, height=width)
     build = lambda spp: build_simulator(scene, sampler=sampler, sampler_params=params, spp=spp,  # noqa: E731
                                         backend=backend)
-    return ConvergenceHarness(build, ladder, reference_spp, metrics=_rung_metrics(), out_dir=tmp_path,
+    return ConvergenceLadder(build, ladder, reference_spp, metrics=_rung_metrics(), out_dir=tmp_path,
                               dataset_fingerprint="test", save_images=False)
 
 
@@ -116,7 +116,7 @@ def test_the_mitsuba_backend_takes_the_derived_seeds(tmp_path):
 @pytest.mark.skipif(not mitsuba_env.llvm_usable(), reason="drjit does not load LLVM >= 19 here")
 def test_the_path_traced_scene_converges_too(tmp_path):
     scene = scenes.spheres_on_plane(width=16, height=12)
-    harness = ConvergenceHarness(lambda spp: build_simulator(scene, spp=spp), (1, 4, 16), 128,
+    harness = ConvergenceLadder(lambda spp: build_simulator(scene, spp=spp), (1, 4, 16), 128,
                                  metrics=_rung_metrics(), out_dir=tmp_path, dataset_fingerprint="test",
                                  save_images=False)
     assert {s.name for s in harness.rungs.values()} == {"path"}

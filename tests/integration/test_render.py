@@ -17,7 +17,7 @@ from brdfbench.errors import ConfigError, RenderError
 from brdfbench.render import sphere
 from brdfbench.render.camera import Camera
 from brdfbench.render.closed_form import ClosedForm
-from brdfbench.render.simulate import build_simulator
+from brdfbench.render.build import build_simulator
 from brdfbench.pipeline.config import RunConfig, harness_config
 from brdfbench.pipeline.sweep import run_job as run
 from brdfbench.plugins.specs import RepresentationSpec

@@ -17,7 +17,7 @@ from scipy import stats
 
 from brdfbench import mitsuba_env, scenes
 from brdfbench.render.camera import Camera
-from brdfbench.render.simulate import build_simulator
+from brdfbench.render.build import build_simulator
 from brdfbench.render.simulator import sphere_hits
 from brdfbench_representations.analytic import GGX
 from brdfbench_representations.lambert import Lambert

@@ -13,7 +13,7 @@ from brdfbench import merl
 from brdfbench.plugins import registry
 from brdfbench.harness import lobes
 from brdfbench.protocols.representation import Material, Representation
-from brdfbench_metrics import categories as C
+from brdfbench.data import categories as C
 
 THETA_H = merl.grid_angles().theta_h.reshape(merl.SHAPE)[:, 0, 0].numpy()  # the 90 θh centres
 

@@ -26,7 +26,7 @@ import torch
 
 from brdfbench import artifacts
 from brdfbench.harness import lobes
-from brdfbench.harness.render import (DISPLAY_CANDIDATES, DisplayRenders, RenderConfig, RenderHarness, TableReference,
+from brdfbench.harness.render import (DISPLAY_CANDIDATES, DisplayRenders, RenderConfig, RenderScorer, TableReference,
                                       fitted_sampler, save_image)
 from brdfbench_leaderboard import cell_figures, figures_html, lobe_svg, view
 from brdfbench_leaderboard.html_parts import anchor
@@ -280,7 +280,7 @@ def test_display_renders_leave_the_measured_render_and_its_metrics_alone(small_d
     with both settings for the report's caption."""
     from brdfbench import images
     from brdfbench.plugins import registry
-    from brdfbench.render.simulate import build_simulator
+    from brdfbench.render.build import build_simulator
 
     scene = registry.get("scenes", "sphere_envmap").load()(width=12, height=12, spp=4)
     built: list[tuple[str, dict, int]] = []
@@ -292,7 +292,7 @@ def test_display_renders_leave_the_measured_render_and_its_metrics_alone(small_d
     measured = build("cosine", {}, None)
     display = DisplayRenders(lambda s, p: build(s, p, 32), "fitted", {}, 32)
     specs = [registry.get("metrics", "psnr_ldr")]
-    harness = RenderHarness(measured, specs, out_dir=tmp_path / "renders", dataset_fingerprint="fp",
+    harness = RenderScorer(measured, specs, out_dir=tmp_path / "renders", dataset_fingerprint="fp",
                             record_to=(tmp_path, "h"), image_meta={"simulator": measured.name, "spp": 4,
                                                                   "sampler": "cosine"}, display=display)
     material = small_dataset.load("synth-metallic-paint-blue-02")

@@ -166,7 +166,7 @@ def test_declared_expected_failure_is_reported_as_xfailed():
         registry.unregister("representations", spec.name)
 
 
-# Quick and full runs: the spec's check_params (a short fit) unless full=True.
+# Quick and full runs: the spec's kit_params (a short fit) unless full=True.
 
 
 class RecordsParams(Lambert):
@@ -180,8 +180,8 @@ class RecordsParams(Lambert):
 
 
 @pytest.mark.parametrize("full,params,expected", [(False, None, True), (True, None, False), (False, {"quick": "mine"}, "mine")])
-def test_quick_run_uses_check_params_full_run_the_defaults(full, params, expected):
-    spec = _spec(RecordsParams, "records_params", check_params={"quick": True})
+def test_quick_run_uses_kit_params_full_run_the_defaults(full, params, expected):
+    spec = _spec(RecordsParams, "records_params", kit_params={"quick": True})
     RecordsParams.made_with.clear()
     try:
         report = check_representation(spec, n_pairs=7000, full=full, params=params).raise_on_failure()
@@ -195,6 +195,6 @@ def test_quick_run_uses_check_params_full_run_the_defaults(full, params, expecte
 # published_fit's quick run names a MERL material; its defaults look up the target's own name,
 # which the kit's synthetic material does not have (a failed fit, by design)
 @pytest.mark.parametrize("name", [n for n in registry.names("representations")
-                                  if registry.get("representations", n).check_params and n != "published_fit"])
+                                  if registry.get("representations", n).kit_params and n != "published_fit"])
 def test_full_conformance_of_plugins_with_a_quick_run(name):
     check_representation(name, full=True).raise_on_failure()

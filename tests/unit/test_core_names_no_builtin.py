@@ -25,6 +25,9 @@ NOT_PLUGINS = {
     ("data/nbrdf_release.py", "merl"): "the subset of the published NBRDF networks fitted to MERL",
     ("data/synthetic.py", "sgd"): "the lobe shape of a synthetic material (Bagher et al.'s SGD distribution)",
     ("protocols/generator.py", "nbrdf"): "what a generator learns from: aligned NBRDF weight vectors",
+    ("distances/brdf.py", "l1"): "a kind of BRDF-space distance between two sets (Zhou et al. eq. 6), not the metric",
+    ("distances/brdf.py", "l1_log"): "a kind of BRDF-space distance between two sets, not the metric",
+    ("distances/brdf.py", "l1_log_cos"): "a kind of BRDF-space distance between two sets (Hu 2026 eq. 4.12), not the metric",
 }
 
 

@@ -12,10 +12,10 @@ import torch
 
 from brdfbench import merl
 from brdfbench.device import CPU, Placed
-from brdfbench_metrics import brdf_distances as BD
+from brdfbench.distances import brdf as BD
 from brdfbench_metrics import image as IM
-from brdfbench_metrics import image_distances as ID
-from brdfbench_metrics import image_functional as IF
+from brdfbench.distances import image as ID
+from brdfbench.distances import image_functional as IF
 
 #: The torch path sums in another order than the numba kernel (fp64 both): measured about
 #: 1e-14 relative on full-grid tables; the brief holds it to 1e-12.

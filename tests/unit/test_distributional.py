@@ -13,7 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from brdfbench import merl
-from brdfbench_metrics import brdf_distances, distributional as D
+from brdfbench.distances import brdf as brdf_distances
+from brdfbench_metrics import distributional as D
 
 # --------------------------------------------------------------------------- the slow reference
 

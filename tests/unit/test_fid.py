@@ -16,7 +16,7 @@ import torch
 from brdfbench.plugins import registry
 from brdfbench.errors import BrdfbenchError
 from brdfbench_metrics import fid as FD
-from brdfbench_metrics import image_distances as D
+from brdfbench.distances import image as D
 
 LINALG_WARNING = "ignore::scipy.linalg.LinAlgWarning"  # sqrtm on singular products says so; expected here
 

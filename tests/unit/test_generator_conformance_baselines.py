@@ -1,5 +1,5 @@
 """The generator conformance kit applied to the four baselines of Zhou et al.'s Table 1
-(PCA-A, PCA-N, VAE-A, VAE-N), each with its spec's quick check_params."""
+(PCA-A, PCA-N, VAE-A, VAE-N), each with its spec's quick kit_params."""
 
 import pytest
 

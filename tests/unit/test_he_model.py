@@ -365,7 +365,7 @@ def test_the_published_parameters_score_with_ngan_s_other_fits():
 
 def test_the_registration_runs_every_check_of_the_kit():
     spec = registry.get("representations", "he")
-    assert spec.tags >= He.tags and spec.check_params == {"n_samples": 4096, "restarts": 1} and not spec.xfail_checks
+    assert spec.tags >= He.tags and spec.kit_params == {"n_samples": 4096, "restarts": 1} and not spec.xfail_checks
     checks = {c.name for c in representation_checks("he")}
     assert checks >= {"protocol", "eval_shapes_and_dtypes", "adversarial_finite_nonnegative", "zero_below_horizon",
                       "reciprocity", "isotropy", "fit_deterministic", "save_load_roundtrip",

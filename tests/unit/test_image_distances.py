@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 from brdfbench.plugins import registry
 from brdfbench.errors import RenderError
 from brdfbench.testing.kit import reference_material
-from brdfbench_metrics import image_distances as D
-from brdfbench_metrics import image_functional as F
+from brdfbench.distances import image as D
+from brdfbench.distances import image_functional as F
 
 # --------------------------------------------------------------------------- the slow reference
 

@@ -15,7 +15,7 @@ from brdfbench import images
 from brdfbench.plugins import registry
 from brdfbench.errors import DataError
 from brdfbench_metrics import image as IM
-from brdfbench_metrics import image_functional as IF
+from brdfbench.distances import image_functional as IF
 
 REPO = Path(__file__).resolve().parents[2]
 FUNCTIONAL = {"mse": IF.mse, "rmse": IF.rmse, "psnr": IF.psnr, "ssim": IF.ssim, "flip": IF.flip}

@@ -13,7 +13,7 @@ import torch
 from brdfbench.plugins import registry
 from brdfbench.testing import check_metric
 from brdfbench_metrics import image as IM
-from brdfbench_metrics import image_functional as IF
+from brdfbench.distances import image_functional as IF
 
 REPO = Path(__file__).resolve().parents[2]
 

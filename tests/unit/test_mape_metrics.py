@@ -10,7 +10,7 @@ import torch
 from brdfbench.plugins import registry
 from brdfbench.testing import check_metric
 from brdfbench_metrics import image as IM
-from brdfbench_metrics import image_functional as IF
+from brdfbench.distances import image_functional as IF
 
 
 def _images(n=None, h=9, w=11, seed=0, scale=2.0) -> torch.Tensor:

@@ -485,7 +485,7 @@ LITERATURE = ("ward", "ward_duer", "phong", "blinn_phong_ngan", "lafortune", "la
 @pytest.mark.parametrize("name", LITERATURE)
 def test_the_kit_runs_every_check_on_each_registered_model(name):
     spec = registry.get("representations", name)
-    assert spec.tags >= TAGS and spec.check_params == QUICK and not spec.xfail_checks
+    assert spec.tags >= TAGS and spec.kit_params == QUICK and not spec.xfail_checks
     checks = {c.name for c in representation_checks(name)}
     assert checks >= {"protocol", "eval_shapes_and_dtypes", "adversarial_finite_nonnegative", "zero_below_horizon",
                       "reciprocity", "isotropy", "fit_deterministic", "save_load_roundtrip",

@@ -40,10 +40,10 @@ from typing import Iterable
 import numpy as np
 import torch
 
-from brdfbench import coords, merl
-from brdfbench.harness.lobes import lobe_half_width, peak_row, theta_h_centres
-from brdfbench.merl import MerlTable
-from brdfbench.protocols.representation import Material, Representation
+from .. import coords, merl
+from ..harness.lobes import lobe_half_width, peak_row, theta_h_centres
+from ..merl import MerlTable
+from ..protocols.representation import Material, Representation
 
 #: The seven categories, in Zhou et al.'s order.
 CATEGORIES = ("diffuse", "metallic", "low-specular", "mid-specular", "high-specular", "plastic", "mirror")

@@ -44,9 +44,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from brdfbench.errors import RenderError
-from brdfbench.images import tonemap
-from brdfbench.threads import torch_threads
+from ..errors import RenderError
+from ..images import tonemap
+from ..threads import torch_threads
 
 from . import image_functional as F
 
@@ -89,10 +89,10 @@ def build_set_simulator(scene: str = "sphere_envmap", *, spp: int | None = DEFAU
     (width and height default to `DEFAULT_SIZE`); the other keys are the render harness's,
     None taking its default. Build it once and `render_with` it for several sets (the
     reference and each sample draw): the scene, environment and kernels load once."""
-    from brdfbench.plugins import registry
-    from brdfbench.pipeline.config import harness_class, harness_config
-    from brdfbench.pipeline.plan import check_params
-    from brdfbench.render.simulate import build_simulator
+    from ..plugins import registry
+    from ..pipeline.config import harness_class, harness_config
+    from ..pipeline.plan import check_params
+    from ..render.build import build_simulator
 
     scene_params = {"width": DEFAULT_SIZE, "height": DEFAULT_SIZE, **scene_params}
     factory = registry.get("scenes", scene).load()

@@ -26,7 +26,7 @@ import math
 import numpy as np
 import torch
 
-from brdfbench.images import tonemap
+from ..images import tonemap
 
 SPACES = ("ldr", "hdr")
 SSIM_WINDOW, SSIM_SIGMA, SSIM_K1, SSIM_K2 = 11, 1.5, 0.01, 0.03

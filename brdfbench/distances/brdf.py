@@ -37,7 +37,7 @@ from typing import Protocol
 import numpy as np
 import torch
 
-from brdfbench import merl
+from .. import merl
 
 KINDS = ("l1", "l1_log", "l1_log_cos")
 #: Cells per chunk: 3 channels × this × (|A| + |B|) fp64 values are live at once.
