@@ -712,6 +712,8 @@ class HyperDiffusion(Generator):
     @classmethod
     def from_state(cls, params: dict[str, Any], tensors: dict[str, Tensor], metadata: dict[str, Any]) -> "HyperDiffusion":
         gen = cls(**params)
+        if not tensors and not metadata:
+            return gen  # what an untrained generator saves: it loads untrained, as the others do
         gen._read_metadata(metadata)
         expected = gen._expected_shapes(len(gen.classes), int(metadata.get("prior_rank", 0)))
         for key, shape in expected.items():

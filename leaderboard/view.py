@@ -448,13 +448,19 @@ def _categories(ok: pd.DataFrame, primary: Metric | None, rows: list[Row]) -> li
     return out if len(out) > 1 else []
 
 
+#: the per-rung RMSE of a convergence cell, then what cells stored before it was recorded hold
+RUNG_RMSE = ("convergence_rmse", "rmse_hdr")
+
+
 def convergence_section(key: tuple[str, str, str, str, str], df: pd.DataFrame) -> ConvergenceSection:
     dataset, fingerprint, scene, _harness, sampler = key
     materials = tuple(sorted(df["material"].unique()))
     ok = df[df.status == "ok"]
-    rmse_rows = ok[(ok.metric == "rmse_hdr") & (ok.spp > 0)]
+    # the harness's own RMSE of HDR radiance per rung; cells stored before it was recorded
+    # have the rmse_hdr metric's rows, the same figure
+    rmse_rows = ok[ok.metric.isin(RUNG_RMSE) & (ok.spp > 0)]
     ladder = sorted(set(int(s) for s in rmse_rows.spp))
-    err = Metric("rmse_hdr", "", False, "accuracy")
+    err = Metric("convergence_rmse", "", False, "accuracy")
     timed = Metric("render_time", "s", False, "cost")
     scalar = Metric("convergence", "", False, "cost")
     rows = []
@@ -468,7 +474,7 @@ def convergence_section(key: tuple[str, str, str, str, str], df: pd.DataFrame) -
             got = mine[(mine.metric == metric) & (mine.spp == 0)]
             return None if got.empty else _cell(got["value"].to_numpy(dtype=float), scalar, len(got), False)
 
-        rmse = cells("rmse_hdr", err)
+        rmse = cells(next((m for m in RUNG_RMSE if (mine.metric == m).any()), RUNG_RMSE[0]), err)
         if not rmse:
             continue
         rows.append(ConvergenceRow(label, rmse, cells("render_time", timed), one("convergence_slope"),

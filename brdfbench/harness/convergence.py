@@ -14,8 +14,9 @@ default top rung the reference adds 1/16 of the rung's own noise.
 
 Per rung the harness records the image metrics of `harness.metrics` (as shipped: the RMSE,
 MAE, MAPE and PSNR of HDR radiance, the four panels of Sztrajman et al.'s convergence
-figures), the relative MSE and the render time (so error against time is available); over
-the rungs, the least-squares slope of the first metric's log (log RMSE) against log spp
+figures), the relative MSE, the render time (so error against time is available) and
+`convergence_rmse`, the RMSE of HDR radiance that the 1/√spp law is about, whatever
+`harness.metrics` holds; over the rungs, the least-squares slope of its log against log spp
 (−½ for an unbiased estimator of finite variance; flatter when rare fireflies dominate,
 since a few spp seldom catch them) and its value at 1 spp implied by the 1/√spp law
 fitted to all rungs, a one-number efficiency of the sampler.
@@ -33,6 +34,7 @@ from typing import Any, Callable, Sequence
 
 import torch
 
+from ..distances.image_functional import rmse
 from ..errors import ConfigError
 from ..protocols.representation import Material, Representation
 from ..provenance import config_hash
@@ -65,9 +67,6 @@ def check_ladder(ladder: Any, reference_spp: Any) -> tuple[int, ...]:
 
 def check_config(harness, scene) -> None:
     """Up-front checks of a convergence harness on `scene` (before any fitting)."""
-    if not harness.metrics:
-        raise ConfigError("harness.metrics=[] must name at least one image metric for harness=convergence: each is "
-                          "measured at every spp of harness.spp_ladder, and the first one's slope is fitted")
     if harness.spp is not None:
         raise ConfigError(f"harness.spp={harness.spp!r} must be null for harness=convergence: "
                           "harness.spp_ladder and harness.reference_spp set the samples per pixel")
@@ -157,9 +156,7 @@ class ConvergenceLadder:
     def __init__(self, build: Callable[[int], Any], ladder: Sequence[int], reference_spp: int, *,
                  metrics: Sequence[MetricSpec], out_dir: Path, dataset_fingerprint: str, seed: int = 0,
                  exposure: float = 0.0, save_images: bool = True, key: dict[str, Any] | None = None):
-        """`metrics`: the image metrics measured at every rung; the first one's slope is fitted."""
-        if not metrics:
-            raise ConfigError("harness=convergence needs at least one image metric (harness.metrics)")
+        """`metrics`: the image metrics measured at every rung, beside `convergence_rmse`."""
         self.metrics = tuple(metrics)
         self.ladder = check_ladder(ladder, reference_spp)
         self.reference_spp = reference_spp
@@ -186,8 +183,9 @@ class ConvergenceLadder:
         )
 
     def measure(self, model: Representation, material: Material, label: str) -> list[Measurement]:
-        """Per rung: each metric, relmse_hdr and render_time; then, of the first metric,
-        convergence_slope and convergence_rmse_1spp (its value at 1 spp under the 1/√spp law)."""
+        """Per rung: each metric, relmse_hdr, convergence_rmse and render_time; then, of
+        convergence_rmse, convergence_slope and convergence_rmse_1spp (its value at 1 spp
+        under the 1/√spp law)."""
         reference = self.reference(model, material, label)
         out, errors = [], []
         for n, simulator in self.rungs.items():
@@ -204,17 +202,18 @@ class ConvergenceLadder:
                 except ValueError:  # a metric relative to the reference's range (HDR PSNR) has none
                     if not black:
                         raise
-            first = self.metrics[0].name
-            errors.append(rung[0].value if rung and rung[0].metric == first else math.nan)
+            error = float(rmse(image, reference, space="hdr"))
+            errors.append(error)
             out += [Measurement(m.metric, m.value, m.unit, m.higher_is_better, spp=n) for m in rung]
             out += [
+                Measurement("convergence_rmse", error, "radiance", False, spp=n),
                 Measurement("relmse_hdr", relative_mse(image, reference), "1", False, spp=n),
                 Measurement("render_time", seconds, "s", False, spp=n),
             ]
         slope, at_one = fit_slope(self.ladder, errors)
         if math.isfinite(slope):
             out += [Measurement("convergence_slope", slope, "1", False),
-                    Measurement("convergence_rmse_1spp", at_one, self.metrics[0].unit, self.metrics[0].higher_is_better)]
+                    Measurement("convergence_rmse_1spp", at_one, "radiance", False)]
         return out
 
 

@@ -122,25 +122,35 @@ class SectionSweeper(BasicSweeper):
         return launcher, jobs if given else [job + [f"threads={threads}"] for job in jobs]
 
     def sweep(self, arguments: list[str]) -> Any:
+        import os
         from pathlib import Path
 
         from omegaconf import OmegaConf
 
+        from brdfbench import parallelism
+
         assert self.config is not None and self.launcher is not None and self.hydra_context is not None
         parser = OverridesParser.create(config_loader=self.hydra_context.config_loader)
         jobs = job_overrides(self.params, self.sections, arguments, parser)
-        launcher, jobs = self._parallel(jobs)
-        self.overrides = list(BasicSweeper.split_overrides_to_chunks(jobs, self.max_batch_size))
-        sweep_dir = Path(self.config.hydra.sweep.dir)
-        sweep_dir.mkdir(parents=True, exist_ok=True)
-        OmegaConf.save(self.config, sweep_dir / "multirun.yaml")
-        returns, index = [], 0
-        while not self.is_done():
-            batch = self.get_job_batch()
-            self.validate_batch_is_legal(batch)
-            results = launcher.launch(batch, initial_job_idx=index)
-            for r in results:
-                _ = r.return_value  # raise a job's exception here, as the basic sweeper does
-            index += len(batch)
-            returns.append(results)
-        return returns
+        before = os.environ.get(parallelism.LAUNCHER_ENV)  # _parallel names the pool for the jobs only
+        try:
+            launcher, jobs = self._parallel(jobs)
+            self.overrides = list(BasicSweeper.split_overrides_to_chunks(jobs, self.max_batch_size))
+            sweep_dir = Path(self.config.hydra.sweep.dir)
+            sweep_dir.mkdir(parents=True, exist_ok=True)
+            OmegaConf.save(self.config, sweep_dir / "multirun.yaml")
+            returns, index = [], 0
+            while not self.is_done():
+                batch = self.get_job_batch()
+                self.validate_batch_is_legal(batch)
+                results = launcher.launch(batch, initial_job_idx=index)
+                for r in results:
+                    _ = r.return_value  # raise a job's exception here, as the basic sweeper does
+                index += len(batch)
+                returns.append(results)
+            return returns
+        finally:
+            if before is None:
+                os.environ.pop(parallelism.LAUNCHER_ENV, None)
+            else:
+                os.environ[parallelism.LAUNCHER_ENV] = before

@@ -147,10 +147,10 @@ def _lines(summary: str) -> dict[str, str]:
 @pytest.mark.parametrize("name,failing,cause,limit", [
     ("hostile_segfault", "save_load_roundtrip", "worker died: segmentation fault (SIGSEGV) during this check", 120),
     ("hostile_exit", "fit_deterministic", "worker died: exited with status 3", 120),
-    ("hostile_hang", "fit_deterministic", "exceeded the time limit of 20 s (worker killed)", 20 + 120),
+    ("hostile_hang", "fit_deterministic", "exceeded the time limit of 10 s (worker killed)", 10 + 120),
 ])
 def test_a_crash_exit_or_hang_fails_that_check_and_the_rest_run(site, tmp_path, name, failing, cause, limit):
-    out, took = _check(name, site, tmp_path, "--timeout", "20")
+    out, took = _check(name, site, tmp_path, "--timeout", "10")
     assert out.returncode == 1, out.stdout + out.stderr
     outcomes = _lines(out.stdout)
     assert outcomes[failing] == "failed", out.stdout

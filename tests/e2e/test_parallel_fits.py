@@ -107,10 +107,11 @@ def test_the_worker_exits_cleanly_after_side_by_side_fits(tmp_path):
     assert process.exitcode == 0
 
 
-@pytest.mark.parametrize("value", ["0", "-1", "999", "abc"])
-def test_a_bad_fit_workers_is_one_line_naming_the_key_and_range(tmp_path, cli_process, value):
-    out = cli_process("representation=blinn_phong", *ARGS, f"fit_workers={value}", f"results_dir={tmp_path}",
-                      cwd=tmp_path)
+@pytest.mark.parametrize("value, fresh", [("0", False), ("-1", False), ("999", False), ("abc", True)])
+def test_a_bad_fit_workers_is_one_line_naming_the_key_and_range(tmp_path, cli, cli_process, value, fresh):
+    """In this process, and once as a user starts it (a fresh interpreter)."""
+    run = cli_process if fresh else cli
+    out = run("representation=blinn_phong", *ARGS, f"fit_workers={value}", f"results_dir={tmp_path}", cwd=tmp_path)
     assert out.returncode == 2
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("brdfbench: error: fit_workers=")

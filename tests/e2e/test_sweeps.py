@@ -146,6 +146,7 @@ def test_a_killed_sweep_resumes_and_recomputes_nothing(tmp_path, cli):
     assert sorted(kept.timestamp) == sorted(old.timestamp)  # nothing finished was recomputed
 
 
+@pytest.mark.slow  # the launchers test below runs three writers of the same cells at once
 def test_two_runs_writing_one_store_at_once_never_duplicate(tmp_path):
     res = tmp_path / "res"
     args = [sys.executable, "-m", "brdfbench.cli", "representation=lambert", *SMALL, "limit=3", f"results_dir={res}"]

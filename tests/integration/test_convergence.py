@@ -73,6 +73,26 @@ def test_a_lambertian_with_cosine_sampling_converges_as_one_over_root_spp(tmp_pa
     assert got["psnr_hdr@spp=64"] > got["psnr_hdr@spp=1"] + 12
     assert all(got[f"render_time@spp={n}"] > 0 for n in LADDER)
     assert got["convergence_rmse_1spp"] == pytest.approx(got["rmse_hdr@spp=1"], rel=0.3)
+    # the harness's own RMSE, which the slope is fitted to, is the rmse_hdr metric's figure
+    assert all(got[f"convergence_rmse@spp={n}"] == pytest.approx(got[f"rmse_hdr@spp={n}"], rel=1e-12) for n in LADDER)
+
+
+def test_the_slope_is_of_the_rmse_whatever_the_metrics(tmp_path):
+    """harness.metrics chooses the extra per-rung figures only: with PSNR first (or none),
+    the slope and the 1-spp value are still those of the RMSE, as their names say."""
+    scene = scenes.sphere_envmap(width=16, height=16)
+    build = lambda spp: build_simulator(scene, sampler="cosine", spp=spp, backend="torch")  # noqa: E731
+    runs = {}
+    for names in ((), ("psnr_hdr", "rmse_hdr")):
+        harness = ConvergenceLadder(build, (1, 4, 16), 128, metrics=[registry.get("metrics", n) for n in names],
+                                    out_dir=tmp_path / str(len(names)), dataset_fingerprint="test", save_images=False)
+        runs[names] = _values(harness.measure(_lambert(), MATERIAL, "lambert"))
+    bare, psnr_first = runs[()], runs[("psnr_hdr", "rmse_hdr")]
+    assert not any(k.startswith(("psnr_hdr", "rmse_hdr")) for k in bare)
+    for key in ("convergence_slope", "convergence_rmse_1spp", "convergence_rmse@spp=4"):
+        assert bare[key] == psnr_first[key]
+    assert psnr_first["convergence_rmse@spp=16"] == pytest.approx(psnr_first["rmse_hdr@spp=16"], rel=1e-12)
+    assert bare["convergence_slope"] < 0 < psnr_first["psnr_hdr@spp=16"] - psnr_first["psnr_hdr@spp=1"]
 
 
 def test_the_sampler_that_matches_the_representation_converges_faster(tmp_path):
@@ -191,7 +211,6 @@ def test_sampler_parameters_are_part_of_the_sampler_label():
     (_convergence(reference_spp=8), "sphere_envmap", "harness.reference_spp=8 must be an integer above .* 8"),
     (_convergence(), "sphere_directional", "scene='sphere_directional' renders with harness.simulator='closed_form'"),
     (_convergence(), "brdf_space", "harness=convergence needs a rendered scene"),
-    (_convergence(metrics=()), "sphere_envmap", r"harness.metrics=\[\] must name at least one image metric"),
     (_convergence(metrics=("l1",)), "sphere_envmap", "harness.metrics: 'l1' is measured on 'merl_grid'"),
     (_convergence(spp=16), "sphere_envmap", "harness.spp=16 must be null"),
 ])

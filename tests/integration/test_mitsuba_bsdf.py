@@ -140,7 +140,13 @@ def adapter_eval(mi, bsdf, light, view, mode=None):
 # --------------------------------------------------------------------------- eval
 
 
-@pytest.mark.parametrize("name", registry.names("representations"))
+#: JIT compilation of the model's kernel takes half a minute here: the He kernel's agreement
+#: with its torch twin is tested in test_he_model, and the adapter path by every other model
+SLOW_EVAL = {"he"}
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.slow] if n in SLOW_EVAL else [])
+                                  for n in registry.names("representations")])
 def test_eval_matches_model(mi, mb, name, record_property, fitted):
     model = make_model(fitted, name)
     light, view = directions(4096, seed=1)

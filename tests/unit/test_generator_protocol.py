@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from brdfbench import modelio
 from brdfbench.errors import ConfigError, DataError, ModelFileError
+from brdfbench.plugins import registry
 from brdfbench.protocols.generator import TrainingData, WeightSet, seeded_split
 from brdfbench_generators.samples import WeightSamples
 from brdfbench_generators.training_set import TrainingSet
@@ -82,3 +83,15 @@ def test_generator_and_representation_files_do_not_load_as_each_other(tmp_path):
     assert not modelio.holds_generator(rep)
     with pytest.raises(ModelFileError, match="holds a representation, not a generator"):
         modelio.load_generator(rep)
+
+
+@pytest.mark.parametrize("name", registry.names("generators"))
+def test_an_untrained_generator_saves_and_loads_untrained(name):
+    """What an untrained generator saves (no tensors, no metadata) loads back untrained, for
+    every built-in: none refuses its own empty state."""
+    spec = registry.get("generators", name)
+    gen = spec.create(**spec.kit_params)
+    assert not gen.fitted
+    tensors, metadata = gen.state_dict(), gen.metadata()
+    loaded = type(gen).from_state(gen.params, tensors, metadata)
+    assert type(loaded) is type(gen) and not loaded.fitted and loaded.state_dict() == tensors == {}
