@@ -94,11 +94,22 @@ def cmd_merge(args) -> int:
 def cmd_check(args) -> int:
     """Each check runs in a worker process under `--timeout`: a plugin that crashes, ends
     the process or hangs fails that check (naming the cause) and the others still run."""
+    import yaml
+
     from .plugins import registry
     from .testing.isolated import check_isolated
 
     if args.timeout <= 0:
         return _fail(f"--timeout must be a positive number of seconds, not {args.timeout:g}")
+    params = {}
+    for item in args.param or ():
+        key, eq, text = item.partition("=")
+        if not eq or not key.strip():
+            return _fail(f"--param {item!r} must look like KEY=VALUE (e.g. --param path=/data/merl)")
+        try:
+            params[key.strip()] = yaml.safe_load(text) if text else ""
+        except yaml.YAMLError:
+            return _fail(f"--param {item!r}: {text!r} is not a YAML value")
     groups = {"representation": "representations", "generator": "generators", "sampler": "samplers",
               "metric": "metrics", "harness": "harnesses", "dataset": "datasets"}
     kind = args.kind
@@ -109,12 +120,14 @@ def cmd_check(args) -> int:
             print(f"brdfbench check: {args.name!r} is also a {' and a '.join(also)}: checking the {kind} "
                   f"(--kind {also[0]} for the other)", file=sys.stderr)
     registry.get(groups[kind], args.name)  # an unknown name: one line, exit 2
+    if params and kind == "metric":
+        return _fail(f"--param {next(iter(params))}=…: a metric takes no parameters")
 
     def progress(check: str, outcome: str, seconds: float) -> None:
         print(f"brdfbench check: {outcome:8s} {check} ({seconds:.1f} s)", file=sys.stderr, flush=True)
 
-    report = check_isolated(kind, args.name, n_pairs=args.pairs, full=args.full, timeout_s=args.timeout,
-                            on_result=progress)
+    report = check_isolated(kind, args.name, n_pairs=args.pairs, full=args.full, params=params,
+                            timeout_s=args.timeout, on_result=progress)
     print(report.summary())
     return 0 if report.passed else 1
 
@@ -179,6 +192,9 @@ def _subcommand_parser() -> argparse.ArgumentParser:
                         "a rendering harness measured, with its full sizes; a dataset's weight vectors read")
     p.add_argument("--timeout", type=float, default=600.0, metavar="SECONDS",
                    help="time limit of each check, run in a worker process (default 600)")
+    p.add_argument("--param", action="append", metavar="KEY=VALUE",
+                   help="a constructor argument (a harness: a config key) over the kit's quick ones, the value "
+                        "read as YAML; repeatable (e.g. a dataset's --param path=/data/merl)")
     p.set_defaults(func=cmd_check)
     p = sub.add_parser("inspect", help="describe a saved model or generator file")
     p.add_argument("path")

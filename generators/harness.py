@@ -24,6 +24,7 @@ CPU to be rendered (Mitsuba renders on the CPU). On the CPU every figure is as b
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from dataclasses import dataclass, field
@@ -32,12 +33,18 @@ from functools import cached_property, lru_cache
 import numpy as np
 import torch
 
-from brdfbench import merl
-from brdfbench.plugins import registry
+from brdfbench import artifacts, merl
+from brdfbench.atomic import replacing
+from brdfbench.data import categories
 from brdfbench.device import CPU, synchronize
-from brdfbench.errors import ConfigError
-from brdfbench.protocols.generator import SampleSet, TrainingData, seeded_split
+from brdfbench.distances.brdf import distance_matrix
+from brdfbench.distances.image import build_set_simulator, image_distance_matrix, render_with
+from brdfbench.errors import ConfigError, RenderError
 from brdfbench.harness import Harness, HarnessConfig, Measurement
+from brdfbench.plugins import registry
+from brdfbench.protocols.generator import TRAINING_CURVE_KEY, SampleSet, TrainingData, seeded_split
+
+from .samples import TableSamples
 
 log = logging.getLogger(__name__)
 
@@ -136,11 +143,6 @@ class GenerationHarness(Harness):
 
     def _save_curve(self, model) -> None:
         """The fit's training curves as an artifact of the configuration, for the report's plot."""
-        import json
-
-        from brdfbench import artifacts
-        from brdfbench.atomic import replacing
-        from brdfbench.protocols.generator import TRAINING_CURVE_KEY
 
         ctx = self.context
         curves = model.metadata().get(TRAINING_CURVE_KEY)
@@ -178,7 +180,6 @@ class GenerationHarness(Harness):
     @cached_property
     def simulator(self):
         """One simulator for R and every draw: the same scene, environment and random numbers."""
-        from brdfbench.distances.image import build_set_simulator
 
         c = self.config
         return build_set_simulator(c.image_scene, spp=c.image_spp, width=c.image_size, height=c.image_size)
@@ -186,7 +187,6 @@ class GenerationHarness(Harness):
     @cached_property
     def reference_images(self):
         """R's tables rendered on spheres (N, H, W, 3), with the seed every draw's samples share."""
-        from brdfbench.distances.image import render_with
 
         merl_rep = registry.get("representations", "merl")
         models = [merl_rep.create().fit(self.context.dataset.load(n)) for n in self.test_names]
@@ -220,25 +220,19 @@ class GenerationHarness(Harness):
     @cached_property
     def thresholds(self):
         """Zhou et al.'s category thresholds, the specular ones from K-means on R's maximum reflectance."""
-        from brdfbench.data.categories import thresholds
 
-        return thresholds([merl.MerlTable.from_values(v) for v in self.reference_values])
+        return categories.thresholds([merl.MerlTable.from_values(v) for v in self.reference_values])
 
     def _category_counts(self, values: list[np.ndarray]) -> list[Measurement]:
         """How many of the draw's samples fall in each of Zhou et al.'s seven categories (they overlap)."""
-        from brdfbench.data.categories import count_categories
 
-        counts = count_categories((merl.MerlTable.from_values(v) for v in values), self.thresholds)
+        counts = categories.count_categories((merl.MerlTable.from_values(v) for v in values), self.thresholds)
         return [Measurement("category_count", float(k), "samples", False, category=name) for name, k in counts.items()]
 
     def _sample_values(self, samples: SampleSet):
         """Every usable sample's values on the grid (float32), their renders (N, H, W, 3) where
         a draw needs them (else None), and how many samples were excluded: a non-finite
         parameter, value or render."""
-        from brdfbench.errors import RenderError
-        from brdfbench.distances.image import render_with
-
-        from .samples import TableSamples
 
         keep, images, excluded = [], [], 0
         finite = samples.finite.cpu()
@@ -270,13 +264,11 @@ class GenerationHarness(Harness):
         return keep, (torch.stack(images) if self.renders and images else None), excluded
 
     def _brdf_matrix(self, values: list[np.ndarray], kind: str) -> np.ndarray:
-        from brdfbench.distances.brdf import distance_matrix
 
         return distance_matrix(self.reference_values + values, None, kind, device=self.device)
 
     def _image_metrics(self, images: torch.Tensor) -> list[Measurement]:
         """Set metrics over the image distances, and the image-set metrics (FID), of a draw's renders."""
-        from brdfbench.distances.image import image_distance_matrix
 
         ref = self.reference_images
         out = []

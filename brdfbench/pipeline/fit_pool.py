@@ -20,6 +20,7 @@ import pickle
 import signal
 import tempfile
 import traceback
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -177,16 +178,25 @@ def _round(model, indices, share, seed: int, processes: int) -> tuple[list, int,
     pool = ready(type(model), max(1, processes))
     for pid in helper_pids():  # helpers started later count their whole life, their start included
         reset_process_peak(pid)
+    futures: list[cf.Future | None] = []
     with _helper_environment():
-        # each fit starts as soon as its table is shared
+        # each fit starts as soon as its table is shared, so a helper may die (and break the
+        # pool) before the last is submitted: those not submitted are lost like the others
         env, cwd = dict(os.environ), os.getcwd()
-        futures = [pool.submit(_fit_one, type(model), dict(model.params), share(i), seed, env, cwd) for i in indices]
+        for i in indices:
+            target = share(i)
+            try:
+                futures.append(pool.submit(_fit_one, type(model), dict(model.params), target, seed, env, cwd))
+            except BrokenProcessPool:
+                futures.append(None)
     out: list = []
     cause = None
     for future in futures:
         try:
+            if future is None:
+                raise BrokenProcessPool("the pool broke before this fit was submitted")
             out.append(future.result())
-        except cf.process.BrokenProcessPool:
+        except BrokenProcessPool:
             cause = cause or _death()
             out.append(_LOST)
         except Exception as exc:  # the model or its result did not pickle, and the like

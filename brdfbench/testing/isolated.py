@@ -36,37 +36,41 @@ DEFAULT_TIMEOUT_S = 600.0
 KINDS = ("representation", "generator", "sampler", "metric", "harness", "dataset")
 
 
-def _checks(kind: str, name: str, n_pairs: int, full: bool) -> tuple[list[Check], dict]:
-    """The kit's checks for the plugin, and the constructor arguments they use."""
+def _checks(kind: str, name: str, n_pairs: int, full: bool, params: dict | None = None) -> tuple[list[Check], dict]:
+    """The kit's checks for the plugin, and the constructor arguments (or config keys) they
+    use; `params` override them (a metric takes none)."""
     if kind == "generator":
         from .generators import _resolve, generator_checks, kit_params
 
         spec = _resolve(name)
-        return generator_checks(spec, full=full), kit_params(spec, full=full)
+        return generator_checks(spec, params=params, full=full), kit_params(spec, params, full=full)
     if kind == "sampler":
         from .samplers import _resolve as _sampler, sampler_checks
 
-        return sampler_checks(_sampler(name), sweep="full" if full else "quick", n_pairs=n_pairs), {}
+        return (sampler_checks(_sampler(name), params=params, sweep="full" if full else "quick", n_pairs=n_pairs),
+                dict(params or {}))
     if kind == "metric":
         from .metrics import metric_checks
 
+        if params:
+            raise ValueError(f"a metric takes no parameters: {sorted(params)}")
         return metric_checks(name, full=full), {}
     if kind == "harness":
         from .harnesses import harness_checks
 
-        return harness_checks(name, full=full), {}
+        return harness_checks(name, params=params, full=full), dict(params or {})
     if kind == "dataset":
         from .datasets import dataset_checks
 
-        return dataset_checks(name, full=full), {}
+        return dataset_checks(name, params, full=full), dict(params or {})
     from .kit import _resolve, kit_params, representation_checks
 
     spec = _resolve(name)
-    return representation_checks(spec, n_pairs=n_pairs, full=full), kit_params(spec, full=full)
+    return representation_checks(spec, params=params, n_pairs=n_pairs, full=full), kit_params(spec, params, full)
 
 
 def check_isolated(kind: str, name: str, *, n_pairs: int = DEFAULT_PAIRS, full: bool = False,
-                   timeout_s: float = DEFAULT_TIMEOUT_S,
+                   params: dict | None = None, timeout_s: float = DEFAULT_TIMEOUT_S,
                    on_result: Callable[[str, str, float], None] | None = None) -> ConformanceReport:
     """Run the kit on plugin `name` of `kind` (one of KINDS), each check in a worker process
     limited to `timeout_s`; a check the worker died or overran in is "failed" (or
@@ -75,7 +79,9 @@ def check_isolated(kind: str, name: str, *, n_pairs: int = DEFAULT_PAIRS, full: 
     import fails the pseudo-check `load`, naming the cause."""
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, not {kind!r}")
-    job = (kind, name, n_pairs, full)
+    if params and kind == "metric":
+        raise ValueError(f"a metric takes no parameters: {sorted(params)}")
+    job = (kind, name, n_pairs, full, dict(params or {}))
     worker: _CheckWorker | None = _CheckWorker(job)
     started = time.monotonic()
     failure = worker.start()
@@ -224,11 +230,11 @@ def _skips(kind: str) -> tuple[type[BaseException], ...]:
 def _worker_main(conn) -> None:
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the parent, which kills us
-    env, cwd, extra, (kind, name, n_pairs, full) = conn.recv()
+    env, cwd, extra, (kind, name, n_pairs, full, params) = conn.recv()
     _sync_environment(env, cwd)
     registry.restore(extra)
     try:
-        built, params = _checks(kind, name, n_pairs, full)
+        built, params = _checks(kind, name, n_pairs, full, params)
         checks = {c.name: c for c in built}
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which fails the checks
         conn.send(("error", f"{type(exc).__name__}: {exc}"))

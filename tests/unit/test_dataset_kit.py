@@ -211,3 +211,27 @@ def test_the_kit_runs_isolated_through_the_cli(capsys):
     assert status == 1 and "failed   splits_disjoint" in out and "passed   loads_materials" in out, out
     assert main(["check", "no_such_dataset", "--kind", "dataset"]) == 2
     assert "no_such_dataset" in capsys.readouterr().err
+
+
+def test_check_param_reaches_the_kit_in_its_worker(capsys):
+    """`brdfbench check --param KEY=VALUE`: the value read as YAML, given to the plugin in the
+    worker; without it the dataset cannot be built and every check is skipped."""
+    from brdfbench.cli import main
+
+    s = spec(needs_a_folder)
+    registry.register("datasets", s)
+    try:
+        assert main(["check", s.name, "--kind", "dataset", "--timeout", "120"]) == 0
+        assert "skipped  builds" in capsys.readouterr().out
+        assert main(["check", s.name, "--kind", "dataset", "--timeout", "120", "--param", "path=/data/merl"]) == 0
+        out = capsys.readouterr().out
+        assert "passed   builds" in out and "/data/merl" in out, out
+        for bad, says in ((["--param", "path"], "--param 'path' must look like KEY=VALUE"),
+                          (["--param", "path=[1,"], "is not a YAML value")):
+            assert main(["check", s.name, "--kind", "dataset", *bad]) == 2
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and says in err[0], err
+    finally:
+        registry.unregister("datasets", s.name)
+    assert main(["check", "l1", "--kind", "metric", "--param", "x=1"]) == 2
+    assert "a metric takes no parameters" in capsys.readouterr().err

@@ -485,7 +485,9 @@ LITERATURE = ("ward", "ward_duer", "phong", "blinn_phong_ngan", "lafortune", "la
 @pytest.mark.parametrize("name", LITERATURE)
 def test_the_kit_runs_every_check_on_each_registered_model(name):
     spec = registry.get("representations", name)
-    assert spec.tags >= TAGS and spec.kit_params == QUICK and not spec.xfail_checks
+    quick = dict(spec.kit_params)  # a short fit: one start, at most QUICK's samples
+    assert quick.keys() == QUICK.keys() and quick["restarts"] == 1 and quick["n_samples"] <= QUICK["n_samples"]
+    assert spec.tags >= TAGS and not spec.xfail_checks
     checks = {c.name for c in representation_checks(name)}
     assert checks >= {"protocol", "eval_shapes_and_dtypes", "adversarial_finite_nonnegative", "zero_below_horizon",
                       "reciprocity", "isotropy", "fit_deterministic", "save_load_roundtrip",
