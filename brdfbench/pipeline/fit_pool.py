@@ -209,6 +209,12 @@ def _round(model, indices, share, seed: int, processes: int) -> tuple[list, int,
 
 def _death() -> str:
     """Words for how the first helper that ended on its own ended."""
+    # the pool's manager thread reaps the dead helper and terminates the rest; a join from
+    # this thread meanwhile can lose the race for the exit status (the child is already
+    # reaped, so it reads as none), so its cleanup is awaited first
+    manager = getattr(_POOL, "_executor_manager_thread", None)
+    if manager is not None:
+        manager.join(timeout=30)
     for p in list(getattr(_POOL, "_processes", {}).values()):
         p.join(timeout=1)
         if p.exitcode not in (None, 0, -signal.SIGTERM):  # the pool ends the others with SIGTERM

@@ -51,3 +51,31 @@ def test_only_the_fit_that_killed_its_helper_fails(monkeypatch, breaks_at_submit
     assert [v for ok, v in out if ok] == ["fitted a", "fitted c", "fitted d"]
     died = out[1][1]
     assert isinstance(died, fit_pool.HelperDied) and "segmentation fault (SIGSEGV)" in str(died)
+
+
+class _Reaped:
+    """A helper that the pool's manager thread has reaped but whose exit status it has not yet
+    recorded: a join from another thread finds no status until the manager's cleanup ends."""
+
+    def __init__(self):
+        self.exitcode = None
+
+    def join(self, timeout=None):
+        pass
+
+
+def test_the_exit_status_is_read_after_the_pools_cleanup(monkeypatch):
+    import signal
+    import threading
+    import time
+
+    helper = _Reaped()
+
+    def cleanup():  # the manager thread: terminate_broken, then the joins that record the status
+        time.sleep(0.3)
+        helper.exitcode = -signal.SIGSEGV
+
+    manager = threading.Thread(target=cleanup)
+    monkeypatch.setattr(fit_pool, "_POOL", SimpleNamespace(_processes={1: helper}, _executor_manager_thread=manager))
+    manager.start()
+    assert fit_pool._death() == "segmentation fault (SIGSEGV)"
