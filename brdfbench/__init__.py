@@ -19,7 +19,7 @@ class _CallableRenderPackage(_types.ModuleType):
     the name is both, and an attribute set by the subpackage's import would shadow a function."""
 
     def __call__(self, *args, **kwargs):
-        from .api import render
+        from .api import render  # lazy: attribute
 
         return render(*args, **kwargs)
 
@@ -29,7 +29,7 @@ _render_package.__class__ = _CallableRenderPackage
 
 def __getattr__(name: str):
     if name in __all__:
-        from . import api
+        from . import api  # lazy: attribute
 
         return getattr(api, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

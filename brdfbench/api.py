@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, Iterator
 from .plugins import registry
 from .errors import ConfigError
 from .harness import HarnessConfig, Measurement
+from .store.protocol import open_store
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -33,7 +34,7 @@ __all__ = ["Scores", "datasets", "evaluate", "generator", "render", "representat
 
 def _harness_config(kind: str, **keys: Any) -> HarnessConfig:
     """Harness `kind`'s typed config: the keys given (not None) over its own defaults."""
-    from .pipeline.config import harness_config
+    from .pipeline.config import harness_config  # lazy: torch
 
     return harness_config(kind, **{k: v for k, v in keys.items() if v is not None})
 
@@ -44,7 +45,7 @@ def _check_seed(seed: Any) -> None:
 
 
 def _checked(factory, params: dict[str, Any], where: str, internal: tuple[str, ...] = ()) -> None:
-    from .pipeline.plan import check_params
+    from .pipeline.plan import check_params  # lazy: torch
 
     check_params(factory, params, where, internal)
 
@@ -78,7 +79,7 @@ def generator(name: str, **params: Any) -> Generator:
 def training_data(dataset: Dataset, names: list[str] | None = None) -> TrainingData:
     """What a generator's `fit` reads: the dataset's training split (its own, where it
     declares one; else every material), or the materials `names`."""
-    from .protocols.generator import TrainingData
+    from .protocols.generator import TrainingData  # lazy: torch
 
     if names is None:
         names = list((dataset.splits or {}).get("train", dataset.materials))
@@ -137,9 +138,9 @@ def evaluate(model: Representation, material: Material, *, metrics: list[str] | 
     time or memory: the fit ran outside)."""
     import torch
 
-    from .harness.accuracy import evaluate_accuracy
-    from .harness.cost import evaluation_throughput, fit_loss, model_size
-    from .pipeline.config import harness_class
+    from .harness.accuracy import evaluate_accuracy  # lazy: torch
+    from .harness.cost import evaluation_throughput, fit_loss, model_size  # lazy: torch
+    from .pipeline.config import harness_class  # lazy: torch
 
     config = _harness_config("accuracy", metrics=metrics, n_random=n_random, dtype=dtype)
     _check_seed(seed)
@@ -168,8 +169,8 @@ def render(model: Representation, scene: str = "sphere_envmap", *, spp: int | No
     None taking its default. `brdfbench.images.tonemap` makes it displayable."""
     import torch
 
-    from .pipeline.config import harness_class
-    from .render.build import build_simulator
+    from .pipeline.config import harness_class  # lazy: torch
+    from .render.build import build_simulator  # lazy: torch
 
     factory = registry.get("scenes", scene).load()
     _checked(factory, scene_params, "scene.params")
@@ -191,7 +192,5 @@ def results(folder: str | Path = "results", *, store: str = "sqlite", **store_pa
     """The results store of a benchmark's results folder (`results_dir`, what `brdfbench`
     writes), never created here: a folder without one is a DataError naming it. `.frame()`
     is the pandas DataFrame of its rows (one per material and metric)."""
-    from .store.protocol import open_store
-
     _checked(registry.get("stores", store).load(), store_params, "store_params", internal=("results_dir", "create"))
     return open_store(store, Path(folder), {**store_params, "create": False})

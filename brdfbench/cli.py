@@ -26,8 +26,12 @@ import os
 import sys
 from pathlib import Path
 
-from .cli_help import SUBCOMMANDS
-from .errors import BrdfbenchError
+from .cli_help import config_help, SUBCOMMANDS, USAGE
+from .errors import BrdfbenchError, os_error
+from . import __version__
+from .plugins import registry
+from .report import write_reports
+from .store.protocol import merge, open_store
 
 EXIT_ERROR = 2
 EXIT_BROKEN_PIPE = 128 + 13  # as a process killed by SIGPIPE
@@ -39,8 +43,6 @@ def _fail(message: str) -> int:
 
 
 def cmd_list(args) -> int:
-    from .plugins import registry
-
     group = args.group
     if group and group not in registry.GROUPS and f"{group}s" in registry.GROUPS:
         group = f"{group}s"  # accept the singular, as in the config groups
@@ -62,8 +64,6 @@ def cmd_list(args) -> int:
 
 
 def cmd_report(args) -> int:
-    from .report import write_reports
-
     for path in write_reports(Path(args.results), args.store):
         print(path)
     return 0
@@ -74,9 +74,6 @@ def cmd_merge(args) -> int:
     one fails before anything is written), then merged cell by cell, each cell in one
     transaction (a finished cell is never replaced, so merging again is harmless), then the
     reports are rewritten."""
-    from .report import write_reports
-    from .store.protocol import merge, open_store
-
     into = Path(args.into).resolve()
     sources = [open_store(args.store, Path(src), {"create": False}) for src in args.sources]
     for src, store in zip(args.sources, sources):
@@ -96,8 +93,7 @@ def cmd_check(args) -> int:
     the process or hangs fails that check (naming the cause) and the others still run."""
     import yaml
 
-    from .plugins import registry
-    from .testing.isolated import check_isolated
+    from .testing.isolated import check_isolated  # lazy: safetensors, torch
 
     if args.timeout <= 0:
         return _fail(f"--timeout must be a positive number of seconds, not {args.timeout:g}")
@@ -133,7 +129,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_inspect(args) -> int:
-    from . import modelio
+    from . import modelio  # lazy: safetensors, torch
 
     if modelio.holds_generator(args.path):
         name, gen = modelio.load_generator(args.path)
@@ -154,7 +150,7 @@ def cmd_inspect(args) -> int:
 
 def cmd_convert(args) -> int:
     try:
-        from .nbrdf.formats import read_network, write_network
+        from .nbrdf.formats import read_network, write_network  # lazy: h5py, safetensors, torch
     except ImportError as exc:  # the built-in plugins are part of the package, but say so if missing
         return _fail(f"convert needs the built-in representations ({exc})")
 
@@ -212,8 +208,6 @@ def _subcommand_parser() -> argparse.ArgumentParser:
 
 def _help_text() -> str:
     """The subcommand parser's help, with the benchmark usage and the config groups around it."""
-    from .cli_help import USAGE, config_help
-
     parser = _subcommand_parser()
     parser.usage = USAGE
     parser.description = "Benchmark BRDF representations: fit, measure accuracy and cost, write a leaderboard."
@@ -242,18 +236,15 @@ def _dispatch(argv: list[str]) -> int:
         except OSError as exc:  # a folder that cannot be read or written: one line, not a traceback
             if isinstance(exc, BrokenPipeError):
                 raise
-            from .errors import os_error
 
             return _fail(os_error(exc, f"brdfbench {args.command}"))
     if "--version" in argv:
-        from . import __version__
-
         print(f"brdfbench {__version__}")
         return 0
     if "-h" in argv or "--help" in argv:
         print(_help_text(), end="")
         return 0
-    from .hydra.app import run_hydra
+    from .hydra.app import run_hydra  # lazy: hydra, pandas, safetensors, torch
 
     return run_hydra(argv)
 

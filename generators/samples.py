@@ -20,6 +20,7 @@ from brdfbench.merl import MerlTable
 from brdfbench.nbrdf.layouts import unflatten
 from brdfbench.nbrdf.network import Network
 from brdfbench.protocols.representation import Material, Representation
+from brdfbench_representations.merl import TabulatedMERL
 
 
 class WeightSamples(SampleSet):
@@ -44,7 +45,7 @@ class WeightSamples(SampleSet):
         return Network(weights=weights, features=self.features, raw_units=self.raw_units)
 
     def _build(self, i: int) -> Representation:
-        from brdfbench_representations.nbrdf import NaiveMLP, NBRDF
+        from brdfbench_representations.nbrdf import NaiveMLP, NBRDF  # lazy: h5py, safetensors
 
         cls = NaiveMLP if self.features == "directions" else NBRDF
         model = cls.from_network(self.network(i))
@@ -68,6 +69,4 @@ class TableSamples(SampleSet):
         return self.to_table(self.array[i])
 
     def _build(self, i: int) -> Representation:
-        from brdfbench_representations.merl import TabulatedMERL
-
         return TabulatedMERL().fit(Material(f"{self.name}-{i}", self.table(i), "generated"))

@@ -19,6 +19,8 @@ from brdfbench import artifacts
 
 from . import lobe_svg
 from .view import TableSection
+from brdfbench.atomic import replacing
+from brdfbench.harness import lobes
 
 MAX_MATERIALS = 6
 LOBE_FLOOR = 1e-3  # 1/sr: the plots' radial axis starts here (log scale)
@@ -73,8 +75,6 @@ def _slices(doc: dict, key: str) -> list[np.ndarray]:
 
 
 def lobe_figures(section: TableSection, results_dir: Path, categories: dict[str, str], plot_prefix: str) -> list[LobeFigure]:
-    from brdfbench.harness import lobes
-
     out = []
     for material in chosen_materials(section, categories):
         docs: dict[int, dict] = {}
@@ -179,8 +179,6 @@ def _write_map(path: Path, values: np.ndarray, cmap: str, vmax: float) -> None:
     from matplotlib import colormaps
     from PIL import Image
 
-    from brdfbench.atomic import replacing
-
     rgba = colormaps[cmap](np.clip(values / vmax, 0, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     with replacing(path) as tmp:
@@ -192,8 +190,8 @@ def error_maps(results_dir: Path, image_exr: Path, reference_exr: Path, stem: st
     PNGs under `<results>/report-images/` (reused while newer than both renders)."""
     import torch
 
-    from brdfbench.images import read_exr
-    from brdfbench.distances.image_functional import flip
+    from brdfbench.images import read_exr  # lazy: torch
+    from brdfbench.distances.image_functional import flip  # lazy: torch
 
     folder = Path(results_dir) / FOLDER
     flip_png, rel_png = folder / f"{stem}.flip.png", folder / f"{stem}.relerr.png"

@@ -9,6 +9,7 @@ from pathlib import Path
 from . import svg_plot
 from .generation_view import DrawCell, GenerationSection, GenRow
 from .units import fmt
+from brdfbench import artifacts
 
 INTRO = ("Each generator is trained on the dataset's training split; each of its {draws} independent sample draws "
          "is scored against the held-out test split ({ref} materials) as a set. A figure is the mean over the draws "
@@ -121,8 +122,6 @@ def _html_table(tid: str, first: str, s: GenerationSection, rows: list[GenRow], 
 def training_curves(s: GenerationSection, results_dir: Path) -> list[tuple[str, str, list[float]]]:
     """(generator label, curve name, values per epoch) of every configuration that left a
     training-curve artifact (`GenerationHarness` writes them)."""
-    from brdfbench import artifacts
-
     out = []
     for c in s.columns:
         entry = artifacts.lookup(results_dir, c.config_hash, "training").get("curve")

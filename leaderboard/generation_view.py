@@ -19,8 +19,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from . import tables
+from . import published_data, tables
 from .tables import Failure
+from brdfbench import citations
 
 #: Table 1's column order, by generator plugin; others follow by label.
 PLUGIN_ORDER = ("training_set", "pca_brdf", "pca_nbrdf", "vae_brdf", "vae_nbrdf", "hyperdiffusion")
@@ -132,10 +133,6 @@ def _columns(df: pd.DataFrame) -> list[Column]:
 
 def _published() -> dict[tuple[str, str], float]:
     """(paper model, paper metric) → the printed figure of Hu 2026, Table 4.5."""
-    from brdfbench import citations
-
-    from . import published_data
-
     out = {}
     for p in published_data.figures():
         if citations.source(p.source) == PAPER_SOURCE and p.table.startswith(PAPER_TABLE):
@@ -214,7 +211,7 @@ def generation_section(key: tuple[str, str, str, str], df: pd.DataFrame) -> Gene
 
 def _category_order(present: set[str]) -> list[str]:
     try:
-        from brdfbench.data.categories import CATEGORIES
+        from brdfbench.data.categories import CATEGORIES  # lazy: torch
     except ImportError:  # the metrics plugin package is optional for reading a store
         CATEGORIES = ()
     return [c for c in CATEGORIES if c in present] + sorted(present - set(CATEGORIES))

@@ -14,10 +14,10 @@ import pandas as pd
 from . import (chart_html, drilldown, drilldown_html, figures_html, generation_render, machines, main_table,
                published_fits_render, published_fits_view, published_render, view)
 from . import plots as plots_module
-from .html_parts import CONTENDED, ON_GPU, anchor, assets, esc, number, svg, th
-from .html_parts import cell as _cell
+from .html_parts import anchor, assets, cell as _cell, CONTENDED, esc, number, ON_GPU, svg, th
 from .markdown import fmt, sharpness_caption
 from .view import ConvergenceSection, Metric, TableSection
+from brdfbench.atomic import replacing
 
 
 #: Where a table section's heat map goes: filled in once the whole page, and so every
@@ -302,8 +302,6 @@ def render(df: pd.DataFrame, source: str, results_dir: Path | None = None) -> st
 
 def html_report(df: pd.DataFrame, results_dir: Path, source: str) -> list[Path]:
     """The `html` report plugin: write `leaderboard.html` into `results_dir`, atomically."""
-    from brdfbench.atomic import replacing
-
     page = results_dir / "leaderboard.html"
     text = render(df, source, results_dir)
     with replacing(page) as tmp:

@@ -6,11 +6,11 @@ from collections.abc import Collection
 
 import pandas as pd
 
-from . import plots as plots_module
-from . import drilldown, machines, view
+from . import drilldown, generation_render, machines, plots as plots_module, published_fits_render, view
 from .published_markdown import published_markdown
 from .units import fmt
 from .view import Cell, ConvergenceSection, Metric, TableSection
+from . import published_fits_view
 
 #: Marks a timing measured while other brdfbench jobs ran on the same host.
 CONTENDED = "†"
@@ -187,7 +187,6 @@ def render_view(report: view.Report, plots: Collection[str] = (), fits=None) -> 
     lines += [f"brdfbench {', '.join(report.versions)}; git {', '.join(report.git_shas)}. "
               "Timings are from the machine that ran each cell:", ""]
     lines += [f"- {line}" for line in host_lines(report.hosts)] + [""]
-    from . import generation_render, published_fits_render
 
     for s in report.sections:
         if isinstance(s, ConvergenceSection):
@@ -227,6 +226,4 @@ def machine_section(speeds: list) -> list[str]:
 
 def render(df: pd.DataFrame, source: str, plots: Collection[str] = ()) -> str:
     """The leaderboard text; `plots` names the figure files written beside it (linked from their sections)."""
-    from . import published_fits_view
-
     return render_view(view.build(df, source), plots, published_fits_view.build(df))

@@ -145,7 +145,7 @@ def authors_loss(source: str) -> str | None:
 def model_of(source: str) -> tuple[str | None, str]:
     """(the model a source's fits are evaluated with, or None, and why not)."""
     try:
-        from brdfbench_representations.published import source_model
+        from brdfbench_representations.published import source_model  # lazy: torch
 
         name = source_model(source)
     except (ImportError, OSError, ValueError, LookupError, BrdfbenchError) as exc:  # the report goes on

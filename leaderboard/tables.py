@@ -14,6 +14,7 @@ from typing import Any
 import pandas as pd
 
 from brdfbench.harness.lobes import TARGET_HALF_WIDTH
+from brdfbench.plugins import registry
 
 @dataclass(frozen=True)
 class Failure:
@@ -164,8 +165,6 @@ def failures(df: pd.DataFrame) -> pd.DataFrame:
 def metric_rank(name: str) -> int | None:
     """The metric plugin's ranking preference (`MetricSpec.rank`); None for an unranked or
     unregistered one (a store may hold figures of a plugin no longer installed)."""
-    from brdfbench.plugins import registry
-
     try:
         return registry.get("metrics", name).rank
     except Exception:  # an unknown name: the registry's lookup error
@@ -175,8 +174,6 @@ def metric_rank(name: str) -> int | None:
 def is_reference(plugin: str, params: dict[str, Any] | None) -> bool:
     """Whether a stored configuration is its representation's reference (the target itself,
     `RepresentationSpec.reference`); False for a plugin no longer installed."""
-    from brdfbench.plugins import registry
-
     try:
         spec = registry.get("representations", plugin)
     except Exception:
@@ -187,8 +184,6 @@ def is_reference(plugin: str, params: dict[str, Any] | None) -> bool:
 
 def dataset_caveat(name: str) -> str:
     """What the dataset plugin says its figures do not show (`DatasetSpec.caveat`), or ""."""
-    from brdfbench.plugins import registry
-
     try:
         return registry.get("datasets", name).caveat
     except Exception:

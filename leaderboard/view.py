@@ -27,6 +27,7 @@ from brdfbench.pipeline import calibration
 from . import tables, units
 from .machines import hosts, machine_speeds
 from .tables import Failure
+from .generation_view import generation_section
 
 BOOTSTRAP_RESAMPLES = 2000
 CONFIDENCE = 0.95
@@ -488,7 +489,6 @@ def build(df: pd.DataFrame, source: str) -> Report:
     generated = time.strftime("%Y-%m-%d %H:%M:%S %Z")
     if df.empty:
         return Report(source, generated, [], [], [], True)
-    from .generation_view import generation_section
 
     machines = machine_speeds(df)
     used = hosts(df)

@@ -14,6 +14,7 @@ from __future__ import annotations
 from brdfbench.protocols.metric import ImageSetMetric, SetMetric
 
 from . import distributional as dist
+from .fid import fid
 
 
 class MMD(SetMetric):
@@ -56,6 +57,4 @@ class FID(ImageSetMetric):
     def compute(self, images_r, images_s, *, device=None) -> float:
         """`device` (None: the CPU): where InceptionV3 extracts the features; the distance
         itself is fp64 on the CPU."""
-        from .fid import fid
-
         return float(fid(images_r, images_s, device=device))

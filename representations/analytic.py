@@ -144,7 +144,7 @@ class AnalyticBRDF(Representation):
         return out.clamp(0.0, torch.finfo(dtype).max)
 
     def fit(self, target: Material, *, seed: int = 0) -> "AnalyticBRDF":
-        from .fitting import fit_analytic  # scipy, only when fitting
+        from .fitting import fit_analytic  # lazy: scipy; scipy, only when fitting
 
         result = fit_analytic(self, target, seed=seed)
         self.set_coefficients(**result.coefficients)
@@ -228,7 +228,7 @@ class CookTorrance(AnalyticBRDF):
         `lobe`); drjit is imported here, not with the representation."""
         if type(self) is not CookTorrance:
             return None
-        from .drjit_kernels import CookTorranceKernel
+        from .drjit_kernels import CookTorranceKernel  # lazy: drjit
 
         return CookTorranceKernel(self)
 
@@ -264,7 +264,7 @@ class GGX(AnalyticBRDF):
         `lobe`); drjit is imported here, not with the representation."""
         if type(self) is not GGX:
             return None
-        from .drjit_kernels import GGXKernel
+        from .drjit_kernels import GGXKernel  # lazy: drjit
 
         return GGXKernel(self)
 
@@ -301,6 +301,6 @@ class BlinnPhong(AnalyticBRDF):
         `lobe`); drjit is imported here, not with the representation."""
         if type(self) is not BlinnPhong:
             return None
-        from .drjit_kernels import BlinnPhongKernel
+        from .drjit_kernels import BlinnPhongKernel  # lazy: drjit
 
         return BlinnPhongKernel(self)

@@ -294,7 +294,7 @@ class He(NganBRDF):
         `lobe`); drjit is imported here, not with the representation."""
         if type(self) is not He:
             return None
-        from .he_kernel import HeKernel
+        from .he_kernel import HeKernel  # lazy: drjit
 
         return HeKernel(self)
 

@@ -91,7 +91,7 @@ class LafortuneLobes(Lafortune):
         elsewhere may change `lobe`); drjit is imported here, not with the representation."""
         if type(self).__module__ != __name__:
             return None
-        from .lafortune_lobes_kernel import LafortuneLobesKernel
+        from .lafortune_lobes_kernel import LafortuneLobesKernel  # lazy: drjit
 
         return LafortuneLobesKernel(self)
 

@@ -76,7 +76,7 @@ class Lambert(Representation):
         `_eval`); drjit is imported here, not with the representation."""
         if type(self) is not Lambert:
             return None
-        from .drjit_kernels import LambertKernel
+        from .drjit_kernels import LambertKernel  # lazy: drjit
 
         return LambertKernel(self)
 

@@ -117,6 +117,6 @@ class TabulatedMERL(Representation):
         `_eval`); drjit is imported here, not with the representation."""
         if type(self) is not TabulatedMERL:
             return None
-        from .drjit_kernels import merl_kernel
+        from .drjit_kernels import merl_kernel  # lazy: drjit
 
         return merl_kernel(self)

@@ -146,7 +146,7 @@ class _MicrofacetModel(AnalyticBRDF):
         subclass may change `lobe`); drjit is imported here, not with the representation."""
         if "KERNEL" not in type(self).__dict__:
             return None
-        from . import microfacet_kernels
+        from . import microfacet_kernels  # lazy: drjit
 
         return getattr(microfacet_kernels, self.KERNEL)(self)
 

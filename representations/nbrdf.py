@@ -241,7 +241,7 @@ class NeuralBRDF(Representation):
         a subclass may change `_eval`."""
         if type(self) not in (NBRDF, NaiveMLP) or self.weights is None:
             return None
-        from .drjit_kernels import MLPKernel
+        from .drjit_kernels import MLPKernel  # lazy: drjit
 
         return MLPKernel(self.network, self.plugin_name)
 

@@ -121,7 +121,7 @@ class NganBRDF(AnalyticBRDF):
     def drjit_kernel(self):
         """The model in drjit operations, for this exact class only (a subclass may change
         `lobe`); drjit is imported here, not with the representation."""
-        from . import ngan_kernels
+        from . import ngan_kernels  # lazy: drjit
 
         exact = type(self).__module__ == __name__  # a subclass elsewhere may change `lobe`
         kernel = ngan_kernels.KERNELS.get(self.NAME) if exact else None

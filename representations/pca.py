@@ -239,6 +239,6 @@ class PCA(Representation):
         `_eval`); drjit is imported here, not with the representation."""
         if type(self) is not PCA:
             return None
-        from .drjit_kernels import pca_kernel
+        from .drjit_kernels import pca_kernel  # lazy: drjit
 
         return pca_kernel(self)

@@ -209,6 +209,6 @@ class SGD(AnalyticBRDF):
         `lobe`); drjit is imported here, not with the representation."""
         if type(self) is not SGD:
             return None
-        from .sgd_kernel import SGDKernel
+        from .sgd_kernel import SGDKernel  # lazy: drjit
 
         return SGDKernel(self)

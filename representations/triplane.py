@@ -199,7 +199,7 @@ class Tripleplane(Representation):
         reads the weights on the host wherever the model lives (Mitsuba's CPU variants)."""
         if type(self) not in (Tripleplane, TriplaneGated) or self.tensors is None:
             return None
-        from .drjit_kernels import TripleplaneKernel
+        from .drjit_kernels import TripleplaneKernel  # lazy: drjit
 
         return TripleplaneKernel(self.shape, {k: v.detach().cpu() for k, v in self.tensors.items()})
 

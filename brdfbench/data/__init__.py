@@ -21,7 +21,7 @@ def check_table(material: Material) -> None:
     """Refuse a table no metric can score: no valid cell, non-finite cells, absurd values."""
     import numpy as np
 
-    from ..merl import CHANNEL_SCALES
+    from ..merl import CHANNEL_SCALES  # lazy: torch
 
     where = material.source or f"material {material.name!r}"
     raw = material.table.raw

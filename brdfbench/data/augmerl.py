@@ -61,10 +61,12 @@ from ..plugins import registry
 from ..errors import ConfigError, DataError, PluginError
 from ..merl import MerlTable
 from ..protocols.representation import Material
-from . import Dataset
-from . import _augmerl_pca as kpca
+from . import _augmerl_pca as kpca, Dataset
 from ._progress import Progress, note
 from .content_hash import cache_root
+from ..atomic import replacing
+from ..device import resolve
+from ..protocols.generator import available_memory, ResourceError, seeded_split
 
 log = logging.getLogger(__name__)
 
@@ -259,8 +261,6 @@ def pca_nbytes(n: int) -> int:
 
 def check_memory(n: int) -> None:
     """Refuse, before any work, a PCA that needs more than MEMORY_SHARE of the free memory."""
-    from ..protocols.generator import ResourceError, available_memory
-
     need, free = pca_nbytes(n), available_memory()
     if need > MEMORY_SHARE * free:
         raise ResourceError(
@@ -301,8 +301,6 @@ def _state_tensors(state: PcaState) -> dict[str, torch.Tensor]:
 def write_state(path: Path, state: PcaState, identity: dict[str, Any]) -> None:
     """Save the state as safetensors, atomically; a cache that cannot be written is only slower."""
     from safetensors.torch import save_file
-
-    from ..atomic import replacing
 
     meta = {"identity": json.dumps(identity, sort_keys=True), "rank": str(state.comp.rank),
             "k_asked": str(state.comp.k_asked)}
@@ -450,8 +448,6 @@ def augmerl_dataset(base: str = "synthetic", base_params: Mapping[str, Any] | No
     """AugMERL over `base` (see the module docstring): `size` materials in total, a seeded
     `test_fraction` held out. Cheap to build: tables (and the PCA) are made on first load.
     `device`: where the PCA's products run (run control; see the module docstring)."""
-    from ..device import resolve
-
     placed = resolve(device, f"{_KEY}.device")
     check_scalars(size, test_fraction, seed, k)
     size, seed, k, test_fraction = int(size), int(seed), int(k), float(test_fraction)
@@ -461,7 +457,6 @@ def augmerl_dataset(base: str = "synthetic", base_params: Mapping[str, Any] | No
         check_memory(len(base_ds))
     recipes: dict[str, Permuted | Mix] = {r.name: r for r in (*permuted, *mixes)}
     names = tuple(recipes)
-    from ..protocols.generator import seeded_split
 
     train, test = seeded_split(names, test_fraction, seed)
     loader = AugmerlLoader(base, base_ds, recipes, k, cache_dir, placed)

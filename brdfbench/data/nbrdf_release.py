@@ -27,6 +27,7 @@ from . import Dataset
 from ..nbrdf.keras_h5 import read_nbrdf_h5
 from .grid_cache import ArrayCache, weights_digest
 from .nbrdf_h5 import grid_cells, grid_outputs, table_from_outputs
+from .content_hash import file_digests
 
 ENV_VAR = "BRDFBENCH_NBRDF_DIR"
 RELATIVE = Path("shared", "data", "neural-brdf")
@@ -99,8 +100,6 @@ def nbrdf_release_dataset(path: str | None = None, subset: str = "merl", limit: 
     if not files:
         raise DataError(f"{folder}: no .h5 files; not an NBRDF release subset")
     names = tuple(sorted(files))
-
-    from .content_hash import file_digests
 
     try:
         entries = list(zip(names, file_digests([files[n] for n in names])))

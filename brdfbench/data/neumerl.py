@@ -54,6 +54,8 @@ from . import Dataset
 from ._progress import Progress, note
 from .augmerl import DEFAULT_K, DEFAULT_SIZE, augmerl_dataset
 from .content_hash import cache_root, sha256_file
+from ..atomic import replacing
+from ..device import describe, resolve
 
 log = logging.getLogger(__name__)
 
@@ -168,8 +170,6 @@ class NeumerlWeights:
 
     def write(self, name: str, weights: dict[str, torch.Tensor], anchor_sha: str, info: dict[str, Any]) -> str:
         """Write `name`'s vector and its record, each atomically (the record last); the vector's sha256."""
-        from ..atomic import replacing
-
         npy, record = self.paths(name)
         try:
             write_network(Network(weights=weights), npy)
@@ -177,8 +177,6 @@ class NeumerlWeights:
             doc = {"format": _RECORD_FORMAT, "name": name, "key": self.key, "sha256": digest,
                    "anchor": self.anchor, "anchor_sha256": anchor_sha, **info}
             if self.device.type != "cpu":
-                from ..device import describe
-
                 doc["fitted_on"] = describe(self.device)
             with replacing(record) as tmp:
                 tmp.write_text(json.dumps(doc, sort_keys=True) + "\n", encoding="utf-8")
@@ -277,8 +275,6 @@ def neumerl_dataset(base: str = "synthetic", base_params: Mapping[str, Any] | No
     """AugMERL's tables and splits (same parameters) plus aligned NBRDF weight vectors,
     fitted on first use and cached (see the module docstring). `device`: where the fits
     (and AugMERL's PCA products) run; run control, not part of the fingerprint."""
-    from ..device import resolve
-
     placed = resolve(device, f"{_KEY}.device")
     params = fit_params(hidden, epochs, n_samples, batch_size, lr)
     batch_materials = _positive_int("batch_materials", batch_materials)

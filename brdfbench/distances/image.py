@@ -49,6 +49,10 @@ from ..images import tonemap
 from ..threads import torch_threads
 
 from . import image_functional as F
+from ..pipeline.config import harness_class, harness_config
+from ..pipeline.plan import check_params
+from ..plugins import registry
+from ..render.build import build_simulator
 
 KINDS = ("rmse", "neg_psnr", "neg_ssim")
 SPACES = F.SPACES
@@ -89,11 +93,6 @@ def build_set_simulator(scene: str = "sphere_envmap", *, spp: int | None = DEFAU
     (width and height default to `DEFAULT_SIZE`); the other keys are the render harness's,
     None taking its default. Build it once and `render_with` it for several sets (the
     reference and each sample draw): the scene, environment and kernels load once."""
-    from ..plugins import registry
-    from ..pipeline.config import harness_class, harness_config
-    from ..pipeline.plan import check_params
-    from ..render.build import build_simulator
-
     scene_params = {"width": DEFAULT_SIZE, "height": DEFAULT_SIZE, **scene_params}
     factory = registry.get("scenes", scene).load()
     check_params(factory, scene_params, "scene.params")

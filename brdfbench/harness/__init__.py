@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from ..errors import ConfigError
+from ..pipeline.memory import parse_size
 
 DTYPES = ("float32", "float64")
 
@@ -62,8 +63,6 @@ class HarnessConfig:
         hints = typing.get_type_hints(type(self))
         for f in dataclasses.fields(self):
             if f.name == "memory_limit":
-                from ..pipeline.memory import parse_size
-
                 object.__setattr__(self, f.name, parse_size(self.memory_limit, "harness.memory_limit"))
                 continue
             object.__setattr__(self, f.name, check_value(f"harness.{f.name}", getattr(self, f.name), hints[f.name],

@@ -11,8 +11,12 @@ from typing import ClassVar
 
 import torch
 
-from . import Harness, HarnessConfig, Measurement
+from . import Harness, HarnessConfig, lobes, Measurement
 from .lobes import TARGET_HALF_WIDTH
+from .. import artifacts
+from ..device import on_host
+from .accuracy import evaluate_accuracy, forget_derived
+from .cost import evaluation_throughput
 
 @dataclass(frozen=True)
 class AccuracyConfig(HarnessConfig):
@@ -36,15 +40,10 @@ class AccuracyHarness(Harness):
 
     def __init__(self, config, context):
         super().__init__(config, context)
-        from .accuracy import forget_derived
 
         forget_derived()  # the previous job's models' derived data (see brdfbench.reused)
 
     def measure(self, model, material, label: str) -> list[Measurement]:
-        from . import lobes
-        from .accuracy import evaluate_accuracy
-        from .cost import evaluation_throughput
-
         c, ctx = self.config, self.context
         dtype = getattr(torch, c.dtype)
         out = evaluate_accuracy(model, material, ctx.metric_specs, n_random=c.n_random, seed=ctx.seed, dtype=dtype)
@@ -58,10 +57,6 @@ class AccuracyHarness(Harness):
         return out
 
     def _save_lobes(self, model, material, label: str, dtype) -> None:
-        from .. import artifacts
-        from ..device import on_host
-        from . import lobes
-
         ctx = self.context
         path = artifacts.index_path(ctx.results_dir, ctx.config_hash, material.name).with_suffix(".lobes.json")
         lobes.write(path, lobes.slices(on_host(model.eval, model.device), dtype), lobes.slices(material.table.lookup),

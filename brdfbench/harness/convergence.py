@@ -41,6 +41,7 @@ from ..provenance import config_hash
 from ..plugins.specs import MetricSpec
 from . import Harness, HarnessContext, Measurement
 from .render import MONTE_CARLO, RenderConfig, cached_render, check_simulation
+from ..render.build import build_simulator
 
 #: ε of the relative MSE (p − r)² / (r² + ε), as in denoising work (Rousselle et al. 2011).
 RELMSE_EPS = 1e-2
@@ -248,7 +249,6 @@ class ConvergenceHarness(Harness):
 
     def __init__(self, config: ConvergenceConfig, context: HarnessContext):
         super().__init__(config, context)
-        from ..render.build import build_simulator
 
         c = config
 

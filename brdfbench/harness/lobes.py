@@ -34,7 +34,7 @@ def in_plane_pairs(theta_i_deg: float, dtype: "torch.dtype | None" = None) -> "t
     """(wi, wo) for one incident inclination and every signed outgoing angle of `THETA_O_DEG`."""
     import torch
 
-    from ..coords import spherical_to_vector
+    from ..coords import spherical_to_vector  # lazy: torch
 
     dtype = dtype or torch.float64
     signed = torch.tensor(THETA_O_DEG, dtype=torch.float64) * (math.pi / 180)

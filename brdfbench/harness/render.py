@@ -23,12 +23,14 @@ from typing import Any, Callable, ClassVar
 
 import torch
 
-from .. import images
+from .. import artifacts, images
 from ..errors import ConfigError, DataError
 from ..protocols.representation import Material, Representation
 from ..provenance import config_hash
 from ..plugins.specs import MetricSpec
 from . import Harness, HarnessConfig, HarnessContext, Measurement
+from ..plugins import registry
+from ..render.build import build_sampler, build_simulator
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +47,7 @@ class TableReference(Representation):
 
     def drjit_kernel(self):
         """The same nearest-cell lookup as a drjit gather, for the Mitsuba adapter."""
-        from ..render.drjit_kernels import table_kernel
+        from ..render.drjit_kernels import table_kernel  # lazy: drjit
 
         return table_kernel(self.table.values, name="reference")
 
@@ -84,7 +86,6 @@ class RenderScorer:
     def _record(self, material: Material, exr: Path, reference: Path, meta: dict[str, Any]) -> None:
         if self.record_to is None:
             return
-        from .. import artifacts
 
         results_dir, chash = self.record_to
         for kind, path in (("image", exr), ("reference", reference)):
@@ -176,8 +177,6 @@ def fitted_sampler(material: Material, candidates=DISPLAY_CANDIDATES, n: int = 4
     f·cosθ/pdf, has the least relative variance, averaged over three view inclinations: the
     BRDF half of direct MIS fitted to the material, so that a sharp lobe and a diffuse one
     both look converged. Deterministic (fixed random numbers)."""
-    from ..render.build import build_sampler
-
     table = TableReference(material)
     views = torch.tensor([[math.sin(math.radians(d)), 0.0, math.cos(math.radians(d))] for d in _VIEWS_DEG],
                          dtype=torch.float64).repeat_interleave(n, 0)
@@ -254,8 +253,6 @@ class RenderConfig(HarnessConfig):
 
 def check_simulation(config, scene) -> None:
     """Light up-front checks of the simulator, backend and sampler a rendered harness asks for."""
-    from ..plugins import registry
-
     scene.chosen_simulator(config.simulator)
     spec = registry.get("samplers", config.sampler)
     try:
@@ -277,8 +274,6 @@ class RenderHarness(Harness):
         super().validate(config, scene, metric_specs)
         check_simulation(config, scene)
         if config.display_sampler != FITTED:
-            from ..plugins import registry
-
             registry.get("samplers", config.display_sampler)
 
     @classmethod
@@ -288,7 +283,6 @@ class RenderHarness(Harness):
 
     def __init__(self, config: RenderConfig, context: HarnessContext):
         super().__init__(config, context)
-        from ..render.build import build_simulator
 
         c = config
         simulator = build_simulator(context.scene, name=c.simulator, sampler=c.sampler, sampler_params=c.sampler_params,

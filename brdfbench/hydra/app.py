@@ -20,8 +20,9 @@ from omegaconf import DictConfig
 from ..errors import BrdfbenchError
 from .callbacks import SWEEP_ENV, prepared
 from .choices import check_group_choices, check_words
-from .jobs import to_run_config, write_summary
+from .jobs import to_run_config, TOP_LEVEL, write_summary
 from ..pipeline import sweep
+from ..cli_help import SUBCOMMANDS
 
 __all__ = ["run_hydra", "to_run_config"]
 
@@ -52,9 +53,6 @@ def run_hydra(argv: list[str]) -> int:
     # `brdfbench harness=render scene=sphere_envmap -m representation=merl,nbrdf`.
     flags = [a for a in argv if a in ("-m", "--multirun")]
     try:
-        from ..cli_help import SUBCOMMANDS
-        from .jobs import TOP_LEVEL
-
         check_words(argv, SUBCOMMANDS, tuple(sorted(TOP_LEVEL)))
         check_group_choices([a for a in argv if not a.startswith("-")])
     except BrdfbenchError as exc:

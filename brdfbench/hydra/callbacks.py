@@ -30,6 +30,7 @@ from .jobs import IN_PROCESS, JOB_SUMMARY, to_run_config
 from ..pipeline import sweep
 from ..pipeline.config import RunConfig
 from ..pipeline.plan import Checked
+from .choices import compose_error_line
 
 BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"
 #: brdfbench's own: the basic sweeper plus a profile's sections (hydra_plugins/brdfbench_sweeper)
@@ -84,8 +85,6 @@ def compose_jobs(config: DictConfig, config_name: str | None,
     first, the sweep's resolved values (`${now:...}`) kept."""
     from hydra.core.global_hydra import GlobalHydra
     from hydra.types import RunMode
-
-    from .choices import compose_error_line
 
     loader = GlobalHydra.instance().config_loader()
     hydra_overrides = list(OmegaConf.to_container(config.hydra.overrides.hydra))

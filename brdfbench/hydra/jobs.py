@@ -11,9 +11,10 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf
 
 from .. import parallelism
-from ..errors import ConfigError
+from ..errors import ConfigError, os_error
 from ..pipeline.config import RunConfig, harness_config
 from ..pipeline.harness_defaults import unset_nulls
+from ..atomic import replacing
 
 JOB_SUMMARY = "brdfbench_job.json"
 #: Summaries of the jobs run in this process, so the end of the sweep has them even where a
@@ -134,9 +135,6 @@ def _launcher(choices: dict) -> str:
 def write_summary(folder: Path, summary: dict[str, Any]) -> None:
     """Keep the job's summary (in memory, and in its Hydra folder for other launchers); a
     folder that cannot be written (a full disk) becomes the job's error, not a traceback."""
-    from ..atomic import replacing
-    from ..errors import os_error
-
     IN_PROCESS.append(summary)
     try:
         folder.mkdir(parents=True, exist_ok=True)

@@ -34,6 +34,7 @@ from ..errors import DataError, ModelFileError, PluginError
 from .keras_h5 import read_nbrdf_h5
 from .layouts import check_finite, check_hidden, flatten, from_torch_state, to_torch_state, unflatten
 from .network import FEATURES, PUBLISHED_HIDDEN, Network
+from ..atomic import replacing
 
 H5_SUFFIXES = (".h5", ".hdf5")
 VECTOR_SUFFIXES = (".npy",)
@@ -166,8 +167,6 @@ def to_model(network: Network):
 
 def write_network(network: Network, path: str | os.PathLike) -> Path:
     """Write weights in the format of `path`'s suffix, atomically (see the table above)."""
-    from ..atomic import replacing
-
     path = Path(path)
     suffix = _suffix(path, WRITABLE, "write network weights to")
     check_finite(network.weights, "weights to write")

@@ -18,6 +18,7 @@ from ..device import check_spec
 from ..errors import ConfigError
 from ..harness import HarnessConfig, check_value
 from .harness_defaults import shipped_defaults
+from ..store.protocol import open_store
 
 PROGRESS = ("auto", "bar", "lines", "none")
 
@@ -116,6 +117,4 @@ class RunConfig:
 
     def open_store(self):
         """The job's results store (the `store` plugin for `results_dir`)."""
-        from ..store.protocol import open_store
-
         return open_store(self.store, self.results_dir, self.store_params)

@@ -55,8 +55,8 @@ class _Target:
     path: str
 
     def material(self):
-        from ..merl import MerlTable
-        from ..protocols.representation import Material
+        from ..merl import MerlTable  # lazy: torch
+        from ..protocols.representation import Material  # lazy: torch
 
         raw = np.asarray(np.load(self.path, mmap_mode="r"))
         return Material(self.name, MerlTable(raw), self.category, self.source)

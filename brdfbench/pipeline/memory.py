@@ -14,6 +14,7 @@ import math
 import os
 import sys
 from pathlib import Path
+from ..errors import ConfigError
 
 _CLEAR = Path("/proc/self/clear_refs")
 _STATUS = Path("/proc/self/status")
@@ -59,8 +60,6 @@ def parse_size(value, key: str = "harness.memory_limit") -> int | None:
     below, is a ConfigError naming `key`, the value and the forms it takes."""
     import re
     from fractions import Fraction
-
-    from ..errors import ConfigError
 
     def bad(why: str = ""):
         return ConfigError(f"{key}={value!r}{why}: must be {SIZE_FORMS}")

@@ -39,9 +39,9 @@ from ..errors import BrdfbenchError
 from .config import RunConfig
 from .memory import format_size, process_peak, process_rss, reset_process_peak
 from .plan import Task
-from .processes import die_with_parent as _die_with_parent
-from .processes import exit_cause
-from .processes import sync_environment as _sync_environment
+from .processes import die_with_parent as _die_with_parent, exit_cause, sync_environment as _sync_environment
+from . import fit_pool
+from .environment import ActiveMarker
 
 log = logging.getLogger(__name__)
 
@@ -296,7 +296,6 @@ def shared_worker() -> Worker:
 def _worker_main(conn) -> None:
     _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the supervisor, which stops us
-    from . import fit_pool
 
     try:
         _serve(conn)
@@ -308,8 +307,7 @@ def _serve(conn) -> None:
     """Run the tasks the supervisor sends until it sends None or goes away."""
     import torch
 
-    from .environment import ActiveMarker
-    from .execute import execute, job_state
+    from .execute import execute, job_state  # lazy: safetensors
 
     marker = ActiveMarker()
     default_threads = torch.get_num_threads()

@@ -36,6 +36,7 @@ import torch
 from ..device import Placed
 from ..errors import ConfigError, DataError
 from .representation import Material, Representation
+from ..nbrdf.network import n_weights
 
 LEARNS_FROM = ("tables", "nbrdf")
 #: `metadata()` key of a generator's training curves: {name: [value per epoch]} (e.g.
@@ -59,8 +60,6 @@ class WeightSet:
     raw_units: bool = False
 
     def __post_init__(self):
-        from ..nbrdf.network import n_weights
-
         v = self.vectors
         if not isinstance(v, np.ndarray) or v.ndim != 2 or v.shape[0] != len(self.names):
             raise DataError(f"weight set: expected a ({len(self.names)}, W) array, got "

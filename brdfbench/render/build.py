@@ -11,6 +11,10 @@ from ..plugins import registry
 from ..errors import ConfigError
 from ..scenes import PROCEDURAL_SKY, Environment, Scene
 from .simulator import Simulator
+from .closed_form import ClosedForm
+from .direct import DirectMIS
+from .envmap import Envmap, load_envmap, procedural_sky
+from .mitsuba_sim import MitsubaSimulator
 
 
 def build_sampler(name: str, params: dict[str, Any] | None = None):
@@ -22,8 +26,6 @@ def build_sampler(name: str, params: dict[str, Any] | None = None):
 
 
 def load_environment(env: Environment):
-    from .envmap import Envmap, load_envmap, procedural_sky
-
     if env.source == PROCEDURAL_SKY:
         return Envmap(procedural_sky(), scale=env.scale)
     return load_envmap(env.source, scale=env.scale)
@@ -45,18 +47,12 @@ def build_simulator(scene: Scene, *, name: str | None = None, sampler: str = "co
     backend = backend or ("mitsuba" if chosen == "path" or mitsuba_env.choose_variant(warn=False) == mitsuba_env.LLVM_VARIANT
                           else "torch")
     if chosen in ("closed_form", "direct_mis", "path") and backend == "mitsuba":
-        from .mitsuba_sim import MitsubaSimulator
-
         build_sampler(sampler, sampler_params)  # a bad sampler fails here, before any fitting
         env = load_environment(scene.environment) if scene.environment is not None else None
         return MitsubaSimulator(scene, env, kind=chosen, sampler=sampler, sampler_params=sampler_params or {}, spp=spp)
     if chosen == "closed_form":
-        from .closed_form import ClosedForm
-
         return ClosedForm(scene, dtype=dtype)
     if chosen == "direct_mis":
-        from .direct import DirectMIS
-
         return DirectMIS(scene, load_environment(scene.environment), build_sampler(sampler, sampler_params),
                          spp=spp, dtype=dtype)
     if chosen == "path":

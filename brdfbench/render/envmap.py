@@ -42,6 +42,7 @@ import numpy as np
 import torch
 
 from ..errors import DataError
+from ..images import read_exr
 
 Tensor = torch.Tensor
 
@@ -301,8 +302,6 @@ def _invert(cdf: Tensor, u: Tensor) -> tuple[Tensor, Tensor]:
 
 def _read_envmap_exr(path: str | os.PathLike) -> Tensor:
     """(H, W, 3) float32 radiance of an OpenEXR lat-long map, or DataError naming the file and fault."""
-    from ..images import read_exr  # checks the magic number, decoding, R/G/B channels, finiteness
-
     path = Path(path)
     return check_envmap_image(read_exr(path), str(path), DataError)
 

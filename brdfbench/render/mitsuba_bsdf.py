@@ -62,6 +62,8 @@ from ..errors import BrdfbenchError, ConfigError, ModelFileError, PluginError, R
 from ..protocols.representation import Representation
 from .drjit_kernels import kernel_for
 from .drjit_samplers import sampler_for
+from .camera import Camera
+from .mitsuba_integrators import DIRECT_MIS_INTEGRATOR, register_integrators
 
 #: Properties the adapter reads itself; every other property is a sampler parameter.
 RESERVED = ("filename", "model_id", "sampler", "material", "kernel")
@@ -521,11 +523,7 @@ def sphere_scene(bsdf: dict, *, resolution: int = 256, spp: int = 16, max_depth:
     filter), lit by one directional light and a constant ambient, rendered by Mitsuba's
     `path` integrator (with `max_depth`), or with integrator="direct_mis" by brdfbench's
     direct-lighting integrator for convex objects (which calls the BSDF without dispatch)."""
-    from .camera import Camera
-
     if integrator == "direct_mis":
-        from .mitsuba_integrators import DIRECT_MIS_INTEGRATOR, register_integrators
-
         register_integrators()
         integrator_dict: dict[str, Any] = {"type": DIRECT_MIS_INTEGRATOR}
     elif integrator == "path":

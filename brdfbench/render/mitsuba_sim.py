@@ -42,6 +42,7 @@ from ..protocols.representation import Representation
 from ..scenes import Scene
 from .mitsuba_integrators import CLOSED_FORM_INTEGRATOR, DIRECT_MIS_INTEGRATOR, register_integrators
 from .simulator import Simulator
+from ..plugins import registry
 
 Tensor = torch.Tensor
 
@@ -76,7 +77,7 @@ class MitsubaSimulator(Simulator):
 
     def _render(self, model: Representation, *, seed: int, material: str = "") -> Tensor:
         with mitsuba_env.mitsuba_variant(self.variant):
-            from . import mitsuba_bsdf
+            from . import mitsuba_bsdf  # lazy: drjit, safetensors
 
             rep_name = self._plugin_name(model, mitsuba_bsdf)
             scene = self._reuse(model, rep_name, material, seed, mitsuba_bsdf)
@@ -124,8 +125,6 @@ class MitsubaSimulator(Simulator):
         """The registered name of the model's class (error messages use it); the adapter's
         own `UNREGISTERED` plugin for a model of no registered class, such as the harness's
         table reference."""
-        from ..plugins import registry
-
         names = mitsuba_bsdf.register_plugins()
         if type(model) not in _PLUGIN_NAMES:
             found = mitsuba_bsdf.UNREGISTERED

@@ -28,7 +28,7 @@ __all__ = ["Sampler", *_HELPERS]
 
 def __getattr__(name: str):
     if name in _HELPERS:
-        from . import directions
+        from . import directions  # lazy: attribute
 
         return getattr(directions, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
@@ -79,7 +79,7 @@ class Sampler(ABC):
         _check_dtypes("pdf", wi, wo)
         import torch
 
-        from ..coords import above_horizon
+        from ..coords import above_horizon  # lazy: torch
 
         mask = above_horizon(wi, wo)
         if bool(mask.all()):
@@ -95,7 +95,8 @@ class Sampler(ABC):
         twin = type(self).__dict__.get("DRJIT_TWIN")
         if twin is None:
             return None
-        from ..render import drjit_lobe_samplers, drjit_samplers  # static, so the import rules see them
+        # imported by name (not through importlib), so that the import rules see them
+        from ..render import drjit_lobe_samplers, drjit_samplers  # lazy: drjit, torch
 
         module, name = twin.split(":")
         modules = {"drjit_samplers": drjit_samplers, "drjit_lobe_samplers": drjit_lobe_samplers}

@@ -22,6 +22,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator
 
 from .schema import UNKNOWN_ENV
+from ..errors import ConfigError
+from ..plugins import registry
 
 if TYPE_CHECKING:  # the protocol and its records import no pandas; a backend's frame() does
     import pandas as pd
@@ -140,9 +142,6 @@ def merge(source: Store, into: Store) -> dict[str, int]:
 
 def open_store(name: str, results_dir: str | Path, params: dict[str, Any] | None = None) -> Store:
     """The store plugin `name` (group `stores`) opened for `results_dir`."""
-    from ..plugins import registry
-    from ..errors import ConfigError
-
     factory = registry.get("stores", name).load()
     try:
         store = factory(Path(results_dir), **(params or {}))

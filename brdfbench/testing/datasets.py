@@ -37,6 +37,7 @@ from ..protocols.representation import Material
 from ..plugins.specs import DatasetSpec
 from .checks import CheckSet
 from .kit import Check, ConformanceReport
+from ..pipeline.plan import check_params
 
 #: Materials of the dataset the kit loads (tables are large: a MERL table is 35 MB).
 MAX_LOADS = 2
@@ -59,8 +60,6 @@ class Context:
     def build(self, params: Mapping[str, Any] | None = None) -> Any:
         """The target's return value for `params` (the kit's own by default); SkipTest where
         it needs a parameter not given or its data is not here."""
-        from ..pipeline.plan import check_params
-
         params = dict(self.params if params is None else params)
         factory = self.spec.load()
         missing = [p.name for p in _signature(factory) if p.default is p.empty and p.name not in params

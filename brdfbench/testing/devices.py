@@ -7,6 +7,7 @@ import unittest
 import torch
 
 from ..errors import ConfigError
+from ..device import cuda_count
 
 #: Device types a plugin may declare (torch.device types brdfbench can resolve or may later).
 KNOWN_DEVICES = frozenset({"cpu", "cuda"})
@@ -24,8 +25,6 @@ class NoDevice(unittest.SkipTest):
 
 def gpu() -> torch.device:
     """cuda:0, or NoDevice where torch sees none."""
-    from ..device import cuda_count
-
     if not cuda_count():
         raise NoDevice("no CUDA device here: the GPU checks run where torch sees one")
     return torch.device("cuda", 0)

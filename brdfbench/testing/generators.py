@@ -40,9 +40,11 @@ from ..plugins.specs import GeneratorSpec
 from . import roundtrip
 from .adversarial import adversarial_pairs
 from .checks import CheckSet
-from .devices import NoDevice, assert_declared
-from .devices import gpu as gpu_device
+from .devices import assert_declared, gpu as gpu_device, NoDevice
 from .kit import Check, ConformanceReport
+from ..data.synthetic import generate_material
+from ..device import on_host, Placed
+from ..nbrdf.layouts import flatten
 
 #: Seed of the kit's shared fit, so it is one side of the fit-determinism check.
 FIT_SEED = 5
@@ -59,8 +61,6 @@ DEVICE_SAMPLE_RTOL = 1e-3
 
 @lru_cache(maxsize=1)
 def _materials() -> tuple[Material, ...]:
-    from ..data.synthetic import generate_material
-
     out = []
     for i in TRAINING_INDICES:
         name, category, table = generate_material(i, seed=0)
@@ -70,8 +70,7 @@ def _materials() -> tuple[Material, ...]:
 
 @lru_cache(maxsize=1)
 def _weights() -> WeightSet:
-    from ..nbrdf.formats import representation_for
-    from ..nbrdf.layouts import flatten
+    from ..nbrdf.formats import representation_for  # lazy: h5py
 
     materials = _materials()
     model = registry.get("representations", representation_for("rusinkiewicz")).create(**QUICK_NBRDF)
@@ -231,8 +230,6 @@ def _places(cls: type) -> bool:
     """Whether a generator class takes part in the device protocol: declares devices beyond
     the CPU, or overrides `to` or `_move` (one that does none of these runs on the CPU and
     inherits a `to` that refuses any other device: nothing to check)."""
-    from ..device import Placed
-
     return (getattr(cls, "devices", frozenset({"cpu"})) != frozenset({"cpu"})
             or getattr(cls, "to", None) is not Placed.to or getattr(cls, "_move", None) is not Placed._move)
 
@@ -253,8 +250,6 @@ def check_devices_declared(ctx: Context) -> None:
 
 
 def _evaluates_finite_nonnegative(samples: SampleSet, where: str) -> None:
-    from ..device import on_host
-
     bad = (~samples.finite).nonzero().flatten().tolist()
     assert not bad, f"{where}: samples {bad} have non-finite parameters"
     items = [samples[i] for i in range(len(samples))]  # built once (a table sample is a full table)

@@ -53,6 +53,7 @@ from ..provenance import config_hash
 from ..plugins.specs import HarnessSpec
 from .checks import CheckSet
 from .kit import Check, ConformanceReport
+from ..pipeline.harness_defaults import shipped_defaults
 
 #: Quick run: integer sizes with a `min` range are cut to this (never below their minimum).
 QUICK_INT = 1024
@@ -125,8 +126,6 @@ class Context:
 
     def values(self) -> dict[str, Any]:
         """The keys of the kit's config: shipped option, quick sizes, `params`, and `kind`."""
-        from ..pipeline.harness_defaults import shipped_defaults
-
         shipped = shipped_defaults(self.spec.name)
         quick = {} if self.full else _quick_sizes(self.cls.Config, shipped)
         return {**shipped, **quick, **self.params, "kind": self.spec.name}

@@ -29,6 +29,13 @@ from ..pipeline.processes import die_with_parent as _die_with_parent
 from ..pipeline.processes import exit_cause
 from ..pipeline.processes import sync_environment as _sync_environment
 from ..pipeline.worker import START_TIMEOUT_S, _main_module_hidden
+from ..sampling.chi2 import Unresolvable
+from . import datasets as dataset_kit
+from . import generators as generator_kit
+from . import harnesses as harness_kit
+from . import kit as representation_kit
+from . import metrics as metric_kit
+from . import samplers as sampler_kit
 from .kit import DEFAULT_PAIRS, Check, ConformanceReport
 
 #: Seconds a check may run by default (`brdfbench check --timeout`).
@@ -40,31 +47,20 @@ def _checks(kind: str, name: str, n_pairs: int, full: bool, params: dict | None 
     """The kit's checks for the plugin, and the constructor arguments (or config keys) they
     use; `params` override them."""
     if kind == "generator":
-        from .generators import _resolve, generator_checks, kit_params
-
-        spec = _resolve(name)
-        return generator_checks(spec, params=params, full=full), kit_params(spec, params, full=full)
+        spec = generator_kit._resolve(name)
+        return generator_kit.generator_checks(spec, params=params, full=full), generator_kit.kit_params(spec, params, full=full)
     if kind == "sampler":
-        from .samplers import _resolve as _sampler, sampler_checks
-
-        return (sampler_checks(_sampler(name), params=params, sweep="full" if full else "quick", n_pairs=n_pairs),
-                dict(params or {}))
+        return (sampler_kit.sampler_checks(sampler_kit._resolve(name), params=params, sweep="full" if full else "quick",
+                                           n_pairs=n_pairs), dict(params or {}))
     if kind == "metric":
-        from .metrics import metric_checks
-
-        return metric_checks(name, full=full), {}  # check_isolated refuses params for a metric
+        return metric_kit.metric_checks(name, full=full), {}  # check_isolated refuses params for a metric
     if kind == "harness":
-        from .harnesses import harness_checks
-
-        return harness_checks(name, params=params, full=full), dict(params or {})
+        return harness_kit.harness_checks(name, params=params, full=full), dict(params or {})
     if kind == "dataset":
-        from .datasets import dataset_checks
-
-        return dataset_checks(name, params, full=full), dict(params or {})
-    from .kit import _resolve, kit_params, representation_checks
-
-    spec = _resolve(name)
-    return representation_checks(spec, params=params, n_pairs=n_pairs, full=full), kit_params(spec, params, full)
+        return dataset_kit.dataset_checks(name, params, full=full), dict(params or {})
+    spec = representation_kit._resolve(name)
+    return (representation_kit.representation_checks(spec, params=params, n_pairs=n_pairs, full=full),
+            representation_kit.kit_params(spec, params, full))
 
 
 def check_isolated(kind: str, name: str, *, n_pairs: int = DEFAULT_PAIRS, full: bool = False,
@@ -218,11 +214,7 @@ class _CheckWorker:
 def _skips(kind: str) -> tuple[type[BaseException], ...]:
     """Exceptions a kind's checks raise to be reported skipped: a sampler's χ² cell that the
     dtype cannot resolve (`check_sampler` skips it too)."""
-    if kind != "sampler":
-        return ()
-    from ..sampling.chi2 import Unresolvable
-
-    return (Unresolvable,)
+    return (Unresolvable,) if kind == "sampler" else ()
 
 
 def _worker_main(conn) -> None:

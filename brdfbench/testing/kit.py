@@ -19,8 +19,11 @@ from ..plugins.specs import RepresentationSpec
 from . import roundtrip
 from .adversarial import adversarial_pairs
 from .checks import CheckSet
-from .devices import DEVICE_EVAL_RTOL, DEVICE_FIT_ABS, DEVICE_FIT_REL, NoDevice, assert_declared
-from .devices import gpu as gpu_device
+from .devices import assert_declared, DEVICE_EVAL_RTOL, DEVICE_FIT_ABS, DEVICE_FIT_REL, gpu as gpu_device, NoDevice
+from ..data.synthetic import generate_material
+from ..errors import BrdfbenchError
+from ..pipeline import fit_pool
+from ..threads import torch_threads
 
 DTYPES = (torch.float32, torch.float64)
 DEFAULT_PAIRS = 10**6
@@ -31,8 +34,6 @@ FIT_SEED = 7
 @lru_cache(maxsize=1)
 def reference_material() -> Material:
     """A measured-like target with a specular lobe, generated in memory (synthetic material 1)."""
-    from ..data.synthetic import generate_material
-
     name, category, table = generate_material(1, seed=0)
     return Material(name=name, table=table, category=category, source="brdfbench.data.synthetic")
 
@@ -43,8 +44,6 @@ TRAINING_INDICES = range(2, 8)
 
 def training_materials():
     """The training split for plugins that need one, generated lazily (one table in memory at a time)."""
-    from ..data.synthetic import generate_material
-
     for i in TRAINING_INDICES:
         name, category, table = generate_material(i, seed=0)
         yield Material(name=name, table=table, category=category, source="brdfbench.data.synthetic")
@@ -210,7 +209,6 @@ def check_load_refuses_broken_state(ctx: Context) -> None:
             try:
                 modelio.load(path)
             except Exception as exc:  # noqa: BLE001 - any refusal, as long as it is a clear one
-                from ..errors import BrdfbenchError
 
                 assert isinstance(exc, BrdfbenchError), (
                     f"a file with {what} raised {type(exc).__name__} ({exc}), not a ModelFileError naming the file")
@@ -288,9 +286,6 @@ def check_fit_in_a_helper(ctx: Context) -> None:
     process (as the runner makes it, `fit_workers`) evaluates bit for bit as the shared model
     fitted here, with this process on two torch threads: a fit that depends on the caller's
     thread count or process state must not declare it."""
-    from ..pipeline import fit_pool
-    from ..threads import torch_threads
-
     cls = ctx.spec.load()
     if not getattr(cls, "fits_in_parallel", False):
         raise unittest.SkipTest(f"{cls.__name__} does not fit side by side (fits_in_parallel is not set)")
