@@ -12,7 +12,6 @@ from pathlib import Path
 import pytest
 
 from brdfbench.hydra import app as hydra_app
-from brdfbench.hydra import callbacks as hydra_callbacks
 from brdfbench.plugins import registry
 from brdfbench.data.synthetic import synthetic_dataset
 from brdfbench.pipeline import plan, sweep
@@ -48,14 +47,13 @@ def checks(tmp_path, monkeypatch):
 def built(monkeypatch):
     """`built()`: how many times a job's config has been built from Hydra's config (in this process)."""
     calls = []
-    for module in (hydra_app, hydra_callbacks):
-        real = module.to_run_config
+    real = hydra_app.to_run_config
 
-        def counting(*args, real=real, **kwargs):
-            calls.append(1)
-            return real(*args, **kwargs)
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
 
-        monkeypatch.setattr(module, "to_run_config", counting)
+    monkeypatch.setattr(hydra_app, "to_run_config", counting)
     return lambda: len(calls)
 
 
@@ -124,7 +122,7 @@ def test_a_bad_job_stops_the_sweep_before_any_work(tmp_path, cli, checks):
     assert lines[-1] == "brdfbench: 1 of 2 job(s) are invalid; nothing was run"
     assert checks() == [(HERE, "0")]  # job 0 checked, here only: nothing ran
     assert not res.exists()
-    assert not hydra_callbacks.PREPARED  # nothing kept for jobs that never run
+    assert not hydra_app.PREPARED  # nothing kept for jobs that never run
 
 
 def test_a_bad_lone_job_is_one_line_and_writes_nothing(tmp_path, cli, checks, checked):
@@ -150,12 +148,12 @@ def test_a_config_folder_on_the_command_line_is_found_when_the_sweep_is_checked(
 
 
 def test_a_prepared_job_is_taken_once_and_only_by_its_own_overrides():
-    hydra_callbacks.PREPARED[7] = (["limit=1"], "config", "checked")
-    assert hydra_callbacks.prepared(7, ["limit=2"]) is None  # not this job's: it builds its own
-    assert 7 not in hydra_callbacks.PREPARED
-    hydra_callbacks.PREPARED[7] = (["limit=1"], "config", "checked")
-    assert hydra_callbacks.prepared(7, ["limit=1"]) == ("config", "checked")
-    assert hydra_callbacks.prepared(7, ["limit=1"]) is None
+    hydra_app.PREPARED[7] = (["limit=1"], "config", "checked")
+    assert hydra_app.prepared(7, ["limit=2"]) is None  # not this job's: it builds its own
+    assert 7 not in hydra_app.PREPARED
+    hydra_app.PREPARED[7] = (["limit=1"], "config", "checked")
+    assert hydra_app.prepared(7, ["limit=1"]) == ("config", "checked")
+    assert hydra_app.prepared(7, ["limit=1"]) is None
 
 
 def _job(results: Path, cache, tag: int, **kw) -> RunConfig:
