@@ -51,6 +51,9 @@ SWEEP_ENV = "BRDFBENCH_SWEEP_ID"
 #: Jobs checked at the sweep's start that run in this process: job number → (its task
 #: overrides, its config, what its check loaded), each taken once by its job.
 PREPARED: dict[int, tuple[list[str], RunConfig, Checked]] = {}
+#: Sweeps (by SWEEP_ENV) whose every job was composed and checked at the start: the
+#: sweeper need not compose them again to validate its batches (`composed_up_front`).
+COMPOSED: set[str] = set()
 
 
 def sweep_overrides(config: DictConfig) -> list[list[str]] | None:
@@ -115,6 +118,11 @@ def compose_jobs(config: DictConfig, config_name: str | None,
     return composed
 
 
+def composed_up_front() -> bool:
+    """Whether the running sweep's jobs were all composed (and checked) at its start."""
+    return os.environ.get(SWEEP_ENV) in COMPOSED
+
+
 def prepared(num: int, overrides: list[str]) -> tuple[RunConfig, Checked] | None:
     """Job `num`'s config and check, made at the sweep's start, where they are this job's
     (the same overrides); taken once."""
@@ -156,6 +164,7 @@ class SweepCallback(Callback):
                 for line in exc.lines:
                     print(line, file=sys.stderr, flush=True)
                 raise SystemExit(2) from None
+            COMPOSED.add(os.environ[SWEEP_ENV])
             if here:
                 PREPARED.update({num: (composed[num][2], job, checked) for num, (job, checked) in enumerate(ready)})
         for key, folder in (("results_dir", config.get("results_dir", "results")), ("hydra.sweep.dir", config.hydra.sweep.dir)):

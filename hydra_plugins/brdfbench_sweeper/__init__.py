@@ -128,6 +128,7 @@ class SectionSweeper(BasicSweeper):
         from omegaconf import OmegaConf
 
         from brdfbench import parallelism
+        from brdfbench.hydra.app import composed_up_front
 
         assert self.config is not None and self.launcher is not None and self.hydra_context is not None
         parser = OverridesParser.create(config_loader=self.hydra_context.config_loader)
@@ -142,7 +143,8 @@ class SectionSweeper(BasicSweeper):
             returns, index = [], 0
             while not self.is_done():
                 batch = self.get_job_batch()
-                self.validate_batch_is_legal(batch)
+                if not composed_up_front():  # else the sweep's start composed every job already
+                    self.validate_batch_is_legal(batch)
                 results = launcher.launch(batch, initial_job_idx=index)
                 for r in results:
                     _ = r.return_value  # raise a job's exception here, as the basic sweeper does

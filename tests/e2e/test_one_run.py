@@ -91,6 +91,21 @@ def test_each_job_of_a_sweep_is_built_once_and_checked_once_in_each_process(tmp_
     assert "sweep: 2 jobs, 2 cells done" in out.stdout
 
 
+def test_the_launcher_is_the_only_one_to_compose_a_job_again(tmp_path, cli, checks, monkeypatch):
+    """The sweep's start composes every job (for its check); then only the launcher composes
+    each job, to hand it to the task function: the sweeper does not compose the batch a third
+    time to validate it."""
+    from hydra._internal.config_loader_impl import ConfigLoaderImpl
+
+    calls = []
+    real = ConfigLoaderImpl.load_sweep_config
+    monkeypatch.setattr(ConfigLoaderImpl, "load_sweep_config", lambda self, *a, **k: calls.append(1) or real(self, *a, **k))
+    out = cli("-m", "representation=lambert", "seed=0,1,2", *SMALL, "limit=1", f"results_dir={tmp_path / 'res'}",
+              cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert len(calls) == 3
+
+
 def test_in_process_cells_check_their_job_once(tmp_path, cli, checks, built, checked):
     out = cli("-m", "representation=lambert", "+dataset.params.tag=0,1", "isolate=false", *SMALL, "limit=1",
               f"results_dir={tmp_path / 'res'}", cwd=tmp_path)
@@ -108,7 +123,9 @@ def test_the_report_is_written_by_the_pipeline(tmp_path, cli, checks, monkeypatc
     assert out.returncode == 0, out.stderr
     assert written == [res] and f"leaderboard: {res / 'leaderboard.md'}" in out.stdout
     package = Path(hydra_app.__file__).parent
-    for adapter in sorted(package.glob("hydra_*.py")):  # the Hydra adapter holds no report logic
+    adapters = sorted(package.glob("*.py"))
+    assert [a.name for a in adapters if a.name == "app.py"], adapters
+    for adapter in adapters:  # the Hydra adapter holds no report logic
         text = adapter.read_text(encoding="utf-8")
         assert "write_reports" not in text and "from .report" not in text, adapter.name
 
