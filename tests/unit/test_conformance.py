@@ -14,9 +14,14 @@ CASES = [(name, {}) for name in registry.names("representations")] + [
 ]
 
 
+#: Adversarial pairs per dtype in this sweep over every built-in (about 29 000 per family):
+#: a fifth of the kit's default, which `brdfbench check` and the slow full run below keep.
+SUITE_PAIRS = 200_000
+
+
 def _checks():
     for name, params in CASES:
-        for check in representation_checks(name, params=params):
+        for check in representation_checks(name, params=params, n_pairs=SUITE_PAIRS):
             label = f"{check}" + (f"[{','.join(f'{k}={v}' for k, v in params.items())}]" if params else "")
             marks = [pytest.mark.xfail(reason=check.xfail_reason, strict=True)] if check.xfail_reason else []
             yield pytest.param(check, id=label, marks=marks)
@@ -198,3 +203,10 @@ def test_quick_run_uses_kit_params_full_run_the_defaults(full, params, expected)
                                   if registry.get("representations", n).kit_params and n != "published_fit"])
 def test_full_conformance_of_plugins_with_a_quick_run(name):
     check_representation(name, full=True).raise_on_failure()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", registry.names("representations"))
+def test_conformance_at_the_kits_default_pairs(name):
+    """Every built-in at the kit's default number of adversarial pairs (the sweep above uses SUITE_PAIRS)."""
+    check_representation(name).raise_on_failure()
