@@ -306,7 +306,7 @@ def test_bad_params_are_named(params, key, tmp_path):
 
 
 def test_memory_refusal(base_params, tmp_path, monkeypatch):
-    monkeypatch.setattr(generator_protocol, "available_memory", lambda: 100 * 2**20)
+    monkeypatch.setattr(A, "available_memory", lambda: 100 * 2**20)  # the name augmerl reads
     with pytest.raises(generator_protocol.ResourceError, match=r"dataset\.params\.base.*GiB"):
         make(base_params, tmp_path, size=40)
     assert len(make(base_params, tmp_path, size=36)) == 36  # no interpolation, no PCA: allowed
