@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable, Iterator, Mapping
 
 from ..errors import DataError
+from .material_types import describe, material_type
 
 if TYPE_CHECKING:  # keep `import brdfbench.data.specs` light: listing plugins must not import torch
     from ..protocols.generator import WeightSet
@@ -60,6 +61,10 @@ class Dataset:
     categories: dict[str, str] | None = None
     splits: Mapping[str, tuple[str, ...]] | None = None
     weights: Callable[[tuple[str, ...]], WeightSet] | None = None
+    #: Per material, its MERL material types (one, or two for a mixture) and its text
+    #: description; where None, both are read from the material's name (`material_types`).
+    types: Mapping[str, tuple[str, ...]] | None = None
+    descriptions: Mapping[str, str] | None = None
 
     def load(self, material: str) -> Material:
         if material not in self.materials:
@@ -70,6 +75,19 @@ class Dataset:
 
     def category(self, material: str) -> str:
         return (self.categories or {}).get(material, "unknown")
+
+    def material_types(self, material: str) -> tuple[str, ...]:
+        """The material's MERL types (Zhou et al.'s 48): none for a material outside MERL."""
+        if self.types is not None and material in self.types:
+            return tuple(self.types[material])
+        found = material_type(material)
+        return (found,) if found else ()
+
+    def description(self, material: str) -> str:
+        """The material's text description (its name as a phrase unless the dataset says otherwise)."""
+        if self.descriptions is not None and material in self.descriptions:
+            return self.descriptions[material]
+        return describe(material)
 
     def __iter__(self) -> Iterator[Material]:
         return (self.load(m) for m in self.materials)
@@ -92,4 +110,7 @@ class Dataset:
         kept = set(chosen)
         splits = None if self.splits is None else {k: tuple(m for m in v if m in kept) for k, v in self.splits.items()}
         categories = None if self.categories is None else {m: c for m, c in self.categories.items() if m in kept}
-        return Dataset(self.name, tuple(chosen), self.loader, self.fingerprint, categories, splits, self.weights)
+        types = None if self.types is None else {m: t for m, t in self.types.items() if m in kept}
+        descriptions = None if self.descriptions is None else {m: d for m, d in self.descriptions.items() if m in kept}
+        return Dataset(self.name, tuple(chosen), self.loader, self.fingerprint, categories, splits, self.weights,
+                       types, descriptions)

@@ -61,7 +61,7 @@ from ..plugins import registry
 from ..errors import ConfigError, DataError, PluginError
 from ..merl import MerlTable
 from ..protocols.representation import Material
-from . import _augmerl_pca as kpca, Dataset
+from . import _augmerl_pca as kpca, Dataset, material_types
 from ._progress import Progress, note
 from .content_hash import cache_root
 from ..atomic import replacing
@@ -463,7 +463,26 @@ def augmerl_dataset(base: str = "synthetic", base_params: Mapping[str, Any] | No
     fingerprint = "augmerl-" + VERSION + ":" + _digest(
         [VERSION, _base_identity(base, base_ds), size, test_fraction, seed, k])
     categories = {r.name: MIXTURE if isinstance(r, Mix) else base_ds.category(r.base) for r in recipes.values()}
-    return Dataset("augmerl", names, loader, fingerprint, categories, {"train": train, "test": test})
+    types = {r.name: recipe_types(base_ds, r) for r in recipes.values()}
+    descriptions = {r.name: recipe_description(base_ds, r) for r in recipes.values()}
+    return Dataset("augmerl", names, loader, fingerprint, categories, {"train": train, "test": test},
+                   types=types, descriptions=descriptions)
+
+
+def recipe_types(base: Dataset, recipe: Permuted | Mix) -> tuple[str, ...]:
+    """A permuted material keeps its base material's types; a mix has both parents' (once each)."""
+    if isinstance(recipe, Permuted):
+        return base.material_types(recipe.base)
+    return tuple(dict.fromkeys((*base.material_types(recipe.a.base), *base.material_types(recipe.b.base))))
+
+
+def recipe_description(base: Dataset, recipe: Permuted | Mix) -> str:
+    """Zhou et al. § 4.4: a permuted copy's base description without its colour words (the
+    identity keeps them), "a mixture of A and B" for a mix of permuted materials A and B."""
+    if isinstance(recipe, Mix):
+        return material_types.mixture(recipe_description(base, recipe.a), recipe_description(base, recipe.b))
+    text = base.description(recipe.base)
+    return text if recipe.permutation == PERMUTATION_NAMES[0] else material_types.without_colour(text)
 
 
 def _loader_of(dataset: Dataset) -> AugmerlLoader:

@@ -283,7 +283,8 @@ def neumerl_dataset(base: str = "synthetic", base_params: Mapping[str, Any] | No
     tables = augmerl_dataset(base, base_params, size, test_fraction, seed, k, cache_dir, device=str(placed))
     weights = NeumerlWeights(tables, params, batch_materials, int(fit_seed), cache_dir, placed)
     fingerprint = f"neumerl-{VERSION}:{_digest([VERSION, tables.fingerprint, weights.recipe])}"
-    return Dataset("neumerl", tables.materials, tables.loader, fingerprint, tables.categories, tables.splits, weights)
+    return Dataset("neumerl", tables.materials, tables.loader, fingerprint, tables.categories, tables.splits, weights,
+                   tables.types, tables.descriptions)
 
 
 def neumerl_fit_info(dataset: Dataset) -> dict[str, dict[str, Any]]:

@@ -32,6 +32,7 @@ import numpy as np
 
 from ..plugins import registry
 from ..data import Dataset, check_table
+from ..data.material_types import MERL_TYPES
 from ..errors import BrdfbenchError, ConfigError, DataError
 from ..protocols.representation import Material
 from ..plugins.specs import DatasetSpec
@@ -217,6 +218,28 @@ def check_categories_consistent(ctx: Context) -> None:
     assert not strangers, f"{w}: categories name materials the dataset does not have: {strangers[:5]}"
     bad = {n: c for n, c in ds.categories.items() if not isinstance(c, str) or not c}
     assert not bad, f"{w}: categories must be non-empty strings, got {dict(list(bad.items())[:5])}"
+
+
+@check()
+def check_types_and_descriptions(ctx: Context) -> None:
+    """What conditional synthesis reads: each material's MERL types (none, one, or two for a
+    mixture, each one of the 48) and a non-empty text description; declared ones name only
+    the dataset's materials."""
+    w = ctx.where("types_and_descriptions")
+    ds = ctx.dataset
+    members = set(ds.materials)
+    for field_name in ("types", "descriptions"):
+        declared = getattr(ds, field_name)
+        strangers = [] if declared is None else [n for n in declared if n not in members]
+        assert not strangers, f"{w}: {field_name} name materials the dataset does not have: {strangers[:5]}"
+    for name in ds.materials:
+        types = ds.material_types(name)
+        assert isinstance(types, tuple) and len(types) <= 2, (
+            f"{w}: material {name!r} has types {types!r}: a tuple of at most two (a mixture's two parents)")
+        unknown = [t for t in types if t not in MERL_TYPES]
+        assert not unknown, f"{w}: material {name!r} has types outside the MERL vocabulary: {unknown}"
+        text = ds.description(name)
+        assert isinstance(text, str) and text.strip(), f"{w}: material {name!r} has description {text!r}: not a text"
 
 
 @check()

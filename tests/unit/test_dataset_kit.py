@@ -108,6 +108,21 @@ def sorted_weights(scale: float = 1.0) -> Dataset:
                    lambda asked: ds.weights(tuple(sorted(asked))))
 
 
+def types_a_stranger(scale: float = 1.0) -> Dataset:
+    ds = diffuse(scale)
+    return Dataset(ds.name, ds.materials, ds.loader, ds.fingerprint, ds.categories, types={"gold": ("brass",)})
+
+
+def unknown_type(scale: float = 1.0) -> Dataset:
+    ds = diffuse(scale)
+    return Dataset(ds.name, ds.materials, ds.loader, ds.fingerprint, ds.categories, types={"grey": ("granite",)})
+
+
+def empty_description(scale: float = 1.0) -> Dataset:
+    ds = diffuse(scale)
+    return Dataset(ds.name, ds.materials, ds.loader, ds.fingerprint, ds.categories, descriptions={"red": " "})
+
+
 def needs_a_folder(path: str) -> Dataset:
     return diffuse()
 
@@ -125,7 +140,7 @@ def test_a_correct_dataset_passes_every_check():
     assert report.passed and set(report.outcomes.values()) == {"passed"}, report.summary()
     assert set(report.outcomes) == {"builds", "names_unique", "fingerprint_stable", "fingerprint_tracks_params",
                                     "loads_materials", "unknown_name_refused", "categories_consistent",
-                                    "splits_disjoint", "weights_aligned"}
+                                    "types_and_descriptions", "splits_disjoint", "weights_aligned"}
     quick = check_dataset(spec(diffuse))
     assert quick.outcomes["weights_aligned"] == "skipped" and "full=True" in quick.details["weights_aligned"]
 
@@ -140,6 +155,9 @@ def test_a_correct_dataset_passes_every_check():
     (wrong_category, "loads_materials", "declares 'metal'", False),
     (accepts_unknown_names, "unknown_name_refused", "an unknown name must be refused", False),
     (categorises_a_stranger, "categories_consistent", "['gold']", False),
+    (types_a_stranger, "types_and_descriptions", "types name materials the dataset does not have: ['gold']", False),
+    (unknown_type, "types_and_descriptions", "outside the MERL vocabulary: ['granite']", False),
+    (empty_description, "types_and_descriptions", "material 'red' has description ' '", False),
     (overlapping_splits, "splits_disjoint", "'red' is in split 'train' and in split 'test'", False),
     (sorted_weights, "weights_aligned", "returned vectors of ['grey', 'red']", True),
 ])
