@@ -46,5 +46,5 @@ if [ -n "$TORCH_INDEX" ]; then
 else
     .venv/bin/python -m pip install -q --disable-pip-version-check torch==2.13.0
 fi
-.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test,launchers]"
+.venv/bin/python -m pip install -q --disable-pip-version-check -e ".[test,launchers,conditioning]"
 echo "setup: done ($(.venv/bin/python -c 'import brdfbench, torch; from brdfbench import device; print("brdfbench", brdfbench.__version__, "torch", torch.__version__, "devices:", ", ".join(device.available()))'))"
