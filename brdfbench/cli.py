@@ -12,6 +12,9 @@ leaderboard). Subcommands that need no config:
     brdfbench inspect MODEL.safetensors describe a saved model or generator (loads no code)
     brdfbench convert SRC DEST          convert neural-BRDF weights between formats
                                         (.h5, .npy 675-vector, .pt state_dict, .safetensors)
+    brdfbench synthesize GEN.safetensors --category C -n N --out DIR
+                                        N samples of a saved generator in one material category
+                                        (constrained synthesis, by rejection)
 
 `brdfbench --help` lists these and the config groups; `--version` prints the version;
 `--hydra-help` is Hydra's own help. Output cut short by a closed pipe (`brdfbench list |
@@ -161,6 +164,52 @@ def cmd_convert(args) -> int:
     return 0
 
 
+def cmd_synthesize(args) -> int:
+    """N samples of one category from a saved generator, by rejection; written (as model
+    files) only when all N were found, into a folder that did not exist."""
+    import shutil
+    import tempfile
+
+    from . import modelio  # lazy: safetensors, torch
+    from .synthesis import checked_category, constrained_samples  # lazy: torch
+
+    category = checked_category(args.category)
+    out = Path(args.out)
+    if out.exists():
+        raise BrdfbenchError(f"--out {out}: exists; give a new folder (samples are never mixed into old ones)")
+    if not out.parent.is_dir():
+        raise BrdfbenchError(f"--out {out}: its parent folder {out.parent} does not exist")
+    if not modelio.holds_generator(args.path):
+        raise BrdfbenchError(f"{args.path}: not a saved generator (brdfbench inspect says what it is)")
+    name, generator = modelio.load_generator(args.path)
+
+    def progress(draw) -> None:
+        print(f"synthesize: {draw.accepted}/{draw.asked} {category} after {draw.drawn} draws "
+              f"({draw.acceptance_rate:.1%}, {draw.seconds:.1f} s)", flush=True)
+
+    try:
+        draw = constrained_samples(generator, category, args.n, seed=args.seed, batch=args.batch,
+                                   max_draws=args.max_draws, on_batch=progress)
+    except RuntimeError as exc:  # e.g. a loaded training set, which holds names only
+        raise BrdfbenchError(f"{args.path}: {exc}") from None
+    rate = f"{draw.accepted} of {draw.drawn} draws ({draw.acceptance_rate:.2%}), {draw.non_finite} non-finite"
+    if not draw.complete:
+        print(f"brdfbench: error: found {rate}, not the {draw.asked} {category} samples asked; nothing written "
+              f"(raise --max-draws, now {args.max_draws})", file=sys.stderr)
+        return 1
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))
+    try:
+        for i, sample in enumerate(draw.samples):
+            modelio.save(sample, draw.representation, tmp / f"{category}-{i:03d}.safetensors")
+        tmp.rename(out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    print(f"{out}: {draw.accepted} {category} samples of generator {name!r} ({draw.representation}); accepted {rate}; "
+          f"{draw.seconds_per_accepted:.2f} s per accepted sample (drawing, building and classifying)")
+    return 0
+
+
 def _subcommand_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="brdfbench", description="BRDF benchmark utilities")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -203,6 +252,17 @@ def _subcommand_parser() -> argparse.ArgumentParser:
     p.add_argument("--features", choices=("rusinkiewicz", "directions"), default="rusinkiewicz",
                    help="input encoding of a .npy/.pt/.h5 source: nbrdf (rusinkiewicz) or naive_mlp (directions)")
     p.set_defaults(func=cmd_convert)
+    p = sub.add_parser("synthesize", help="samples of a saved generator in one material category (constrained "
+                                          "synthesis, by rejection against the category rules)")
+    p.add_argument("path", metavar="GENERATOR", help="a saved generator (.safetensors)")
+    p.add_argument("--category", required=True,
+                   help="diffuse, metallic, low-specular, mid-specular, high-specular, plastic or mirror")
+    p.add_argument("-n", type=int, default=8, help="samples to find (default 8)")
+    p.add_argument("--out", required=True, metavar="DIR", help="a new folder for the samples' model files")
+    p.add_argument("--seed", type=int, default=0, help="seed of the draws (default 0)")
+    p.add_argument("--batch", type=int, default=32, help="samples drawn at a time (default 32)")
+    p.add_argument("--max-draws", type=int, default=4096, help="give up after this many draws (default 4096)")
+    p.set_defaults(func=cmd_synthesize)
     return parser
 
 

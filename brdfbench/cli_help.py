@@ -12,7 +12,7 @@ from importlib import resources
 from typing import Any
 
 #: The subcommands of `brdfbench` (anything else is a benchmark run's overrides).
-SUBCOMMANDS = ("list", "report", "merge", "check", "inspect", "convert")
+SUBCOMMANDS = ("list", "report", "merge", "check", "inspect", "convert", "synthesize")
 
 CONF_PACKAGE = "brdfbench_conf"
 GROUPS = ("representation", "dataset", "harness", "scene")
