@@ -36,6 +36,7 @@ import torch
 from brdfbench import artifacts, merl
 from brdfbench.atomic import replacing
 from brdfbench.data import categories
+from brdfbench.data.augmerl import unaugmented
 from brdfbench.device import CPU, synchronize
 from brdfbench.distances.brdf import distance_matrix
 from brdfbench.distances.image import build_set_simulator, image_distance_matrix, render_with
@@ -69,6 +70,17 @@ class GenerationConfig(HarnessConfig):
     image_size: int = field(default=64, metadata={"min": 8})  # rendered width = height (pixels)
     image_spp: int = field(default=64, metadata={"min": 1})  # samples per pixel of Monte Carlo scenes
     timeout_s: float | None = field(default=7200.0, metadata={"min_exclusive": 0})
+    #: False: train on the training split's base materials alone, unpermuted and unmixed (Hu 2026,
+    #: Table 4.5's "without augmentation"; AugMERL and NeuMERL); scored on the same test split
+    augmented: bool = True
+
+    def hashed(self) -> dict:
+        """As every harness's, without `augmented` at its default (configurations stored before
+        the key existed keep their hash)."""
+        out = super().hashed()
+        if out.get("augmented") is True:
+            del out["augmented"]
+        return out
 
     def __post_init__(self):
         super().__post_init__()
@@ -114,10 +126,19 @@ class GenerationHarness(Harness):
 
     @staticmethod
     def split(config: GenerationConfig, dataset, seed: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
-        """(train, test): the dataset's own split where it declares one, else a seeded one."""
+        """(train, test): the dataset's own split where it declares one, else a seeded one;
+        with `augmented=False`, the training split's unaugmented base materials only."""
         if dataset.splits is not None and "train" in dataset.splits and "test" in dataset.splits:
-            return tuple(dataset.splits["train"]), tuple(dataset.splits["test"])
-        return seeded_split(dataset.materials, config.test_fraction, seed)
+            train, test = tuple(dataset.splits["train"]), tuple(dataset.splits["test"])
+        else:
+            train, test = seeded_split(dataset.materials, config.test_fraction, seed)
+        if not config.augmented:
+            try:
+                train = unaugmented(dataset, train)
+            except ConfigError:
+                raise ConfigError(f"harness.augmented=false trains on AugMERL's unaugmented base materials; dataset "
+                                  f"{dataset.name!r} is not AugMERL or NeuMERL") from None
+        return train, test
 
     @classmethod
     def plan_sets(cls, config: GenerationConfig, dataset, seed: int):

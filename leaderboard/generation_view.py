@@ -13,6 +13,7 @@ shown in their printed display scale ("×1e2": the figure times 100), ours conve
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 
@@ -29,6 +30,8 @@ PLUGIN_ORDER = ("training_set", "pca_brdf", "pca_nbrdf", "vae_brdf", "vae_nbrdf"
 PAPER_MODELS = {"training_set": "training set", "pca_brdf": "PCA-A (PCA-brdf)", "pca_nbrdf": "PCA-N (PCA-mlp)",
                 "vae_brdf": "VAE-A (VAE-brdf)", "vae_nbrdf": "VAE-N (VAE-mlp)",
                 "hyperdiffusion": "hyperdiffusion (NeuMaDiff)"}
+#: The paper's column of a generator trained without augmentation (`harness.augmented=false`).
+PAPER_UNAUGMENTED = {"hyperdiffusion": "hyperdiffusion without augmentation"}
 PAPER_TABLE = "Table 4.5"
 PAPER_SOURCE = "Hu 2026"  # the paper of PAPER_TABLE, as `brdfbench.citations` cites it
 DISTANCE_NAMES = {"l1": "BRDF-L1", "l1_log": "BRDF-L1-log", "l1_log_cos": "BRDF-L1-log-cos", "rmse": "RMSE",
@@ -63,6 +66,12 @@ class Column:
     config_hash: str
     label: str
     plugin: str
+    augmented: bool = True  # False: trained on the unaugmented base materials only (harness.augmented)
+
+    @property
+    def paper_model(self) -> str | None:
+        """The paper's column for this configuration (Hu 2026, Table 4.5), if it has one."""
+        return (PAPER_MODELS if self.augmented else PAPER_UNAUGMENTED).get(self.plugin)
 
 
 @dataclass(frozen=True)
@@ -124,9 +133,22 @@ def draw_cell(values: np.ndarray) -> DrawCell:
     return DrawCell(mean, mean - half, mean + half, int(values.size))
 
 
+def _augmented(params: str | None) -> bool:
+    """A stored configuration's `harness.augmented` (True where it was not recorded: the default)."""
+    try:
+        harness = json.loads(params or "null").get("harness") or {}
+    except (ValueError, AttributeError):
+        return True
+    return harness.get("augmented", True) is not False
+
+
 def _columns(df: pd.DataFrame) -> list[Column]:
     configs = df.drop_duplicates("config_hash")
-    cols = [Column(c.config_hash, c.representation, getattr(c, "plugin", "") or "") for c in configs.itertuples()]
+    cols = []
+    for c in configs.itertuples():
+        augmented = _augmented(getattr(c, "params", None))
+        label = c.representation if augmented else f"{c.representation} (without augmentation)"
+        cols.append(Column(c.config_hash, label, getattr(c, "plugin", "") or "", augmented))
     order = {p: i for i, p in enumerate(PLUGIN_ORDER)}
     return sorted(cols, key=lambda c: (order.get(c.plugin, len(order)), c.label))
 
@@ -162,7 +184,7 @@ def _row(ok: pd.DataFrame, columns: list[Column], metric: str, distance: str, la
         mine = got[got.config_hash == c.config_hash].drop_duplicates("material", keep="last")
         if not mine.empty:
             cells[c.config_hash] = draw_cell(mine["value"].to_numpy(dtype=float))
-        model = PAPER_MODELS.get(c.plugin)
+        model = c.paper_model
         if paper_metric and model and (model, paper_metric) in papers:
             printed[c.config_hash] = papers[(model, paper_metric)]
     if not cells:

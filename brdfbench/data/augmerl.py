@@ -485,6 +485,15 @@ def recipe_description(base: Dataset, recipe: Permuted | Mix) -> str:
     return text if recipe.permutation == PERMUTATION_NAMES[0] else material_types.without_colour(text)
 
 
+def unaugmented(dataset: Dataset, names: tuple[str, ...]) -> tuple[str, ...]:
+    """The materials among `names` that are a base material unchanged (the identity
+    permutation, no mix): what a generator "without augmentation" trains on (Hu 2026,
+    Table 4.5). Refused for a dataset that is not AugMERL or NeuMERL."""
+    recipes = _loader_of(dataset).recipes
+    identity = PERMUTATION_NAMES[0]
+    return tuple(n for n in names if isinstance(recipes.get(n), Permuted) and recipes[n].permutation == identity)
+
+
 def _loader_of(dataset: Dataset) -> AugmerlLoader:
     loader = dataset.loader
     if not isinstance(loader, AugmerlLoader):
