@@ -31,7 +31,7 @@ class ConstrainedDraw:
     asked: int
     samples: list = field(default_factory=list)  # the accepted samples, built (fitted representations)
     representation: str = ""  # the registered representation they are instances of
-    drawn: int = 0  # samples drawn, accepted or not
+    drawn: int = 0  # samples drawn and examined, accepted or not
     non_finite: int = 0  # drawn samples with a non-finite parameter (never built)
     seconds: float = 0.0
 
@@ -91,6 +91,7 @@ def constrained_samples(generator, category: str, n: int, *, seed: int = 0, batc
         out.representation = drawn.representation
         finite = drawn.finite.tolist()
         for i in range(len(drawn)):
+            out.drawn += 1
             if not finite[i]:
                 out.non_finite += 1
                 continue
@@ -99,7 +100,6 @@ def constrained_samples(generator, category: str, n: int, *, seed: int = 0, batc
                 out.samples.append(sample)
                 if out.complete:
                     break
-        out.drawn += size if not out.complete else i + 1
         out.seconds = time.perf_counter() - start
         k += 1
         if on_batch is not None:

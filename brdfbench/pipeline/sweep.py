@@ -2,8 +2,9 @@
 execute → record), then the reports of their results folders written once.
 
 `run_sweep(jobs)` is all of it in one call. Hydra's adapter (`brdfbench.hydra.app`), whose
-launchers start the jobs themselves, takes the same steps one at a time: `check_jobs` before the first job, `run_one` for each job (with what
-`check_jobs` loaded, where the job runs in this process), `finish` after the last.
+launchers start the jobs themselves, takes the same steps one at a time: `check_jobs`
+before the first job, `run_one` for each job (with what `check_jobs` loaded, where the job
+runs in this process), `finish` after the last.
 
 A job is checked once per process. Cells run in a worker process with a hard time limit: a
 plugin that raises, hangs, crashes or is killed becomes a recorded failure row and the
