@@ -304,9 +304,21 @@ def _dispatch(argv: list[str]) -> int:
     if "-h" in argv or "--help" in argv:
         print(_help_text(), end="")
         return 0
-    from .hydra.app import run_hydra  # lazy: hydra, pandas, safetensors, torch
-
     return run_hydra(argv)
+
+
+def run_hydra(argv: list[str]) -> int:
+    """The benchmark itself: the command line checked, then Hydra's entry (brdfbench.hydra.app),
+    which composes the jobs and hands them to the pipeline."""
+    from .hydra import app  # lazy: hydra, pandas, safetensors, torch
+
+    try:
+        sys.argv = app.checked_argv(argv)
+    except BrdfbenchError as exc:
+        print(f"brdfbench: error: {exc}", file=sys.stderr, flush=True)
+        return 2
+    app.main()
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -38,9 +38,9 @@ from ..pipeline import sweep
 from ..pipeline.config import RunConfig
 from ..pipeline.plan import Checked
 from .choices import check_group_choices, check_words, compose_error_line
-from .jobs import IN_PROCESS, JOB_SUMMARY, TOP_LEVEL, to_run_config, write_summary
+from .jobs import IN_PROCESS, JOB_SUMMARY, TOP_LEVEL, job_overrides, parallel_workers, to_run_config, write_summary
 
-__all__ = ["SweepCallback", "run_hydra", "to_run_config"]
+__all__ = ["SweepCallback", "checked_argv", "main", "to_run_config"]
 
 BASIC_SWEEPER = "hydra._internal.core_plugins.basic_sweeper.BasicSweeper"
 #: brdfbench's own: the basic sweeper plus a profile's sections (hydra_plugins/brdfbench_sweeper)
@@ -69,8 +69,6 @@ def sweep_overrides(config: DictConfig) -> list[list[str]] | None:
 
     params = plain(config.hydra.sweeper.get("params"))
     if target == SECTION_SWEEPER:
-        from hydra_plugins.brdfbench_sweeper import job_overrides
-
         sections = plain(config.hydra.sweeper.get("sections"))
         return job_overrides(params, sections, task)
     if target != BASIC_SWEEPER:
@@ -85,8 +83,6 @@ def runs_here(config: DictConfig, n_jobs: int) -> bool:
     if not str(config.hydra.launcher.get("_target_", "")).endswith("BasicLauncher"):
         return False
     if config.hydra.sweeper.get("_target_") == SECTION_SWEEPER:
-        from hydra_plugins.brdfbench_sweeper import parallel_workers
-
         return parallel_workers(config, n_jobs) < 2
     return True
 
@@ -217,16 +213,18 @@ def _app(cfg: DictConfig) -> None:
         raise SystemExit(2 if summary.get("printed") else sweep.finish([summary]))
 
 
-def run_hydra(argv: list[str]) -> int:
+def checked_argv(argv: list[str]) -> list[str]:
+    """The command line as Hydra's parser takes it (`sys.argv`), after the checks Hydra does
+    not make: a misspelt word or group choice is a ConfigError naming it."""
     # Hydra's parser takes flags only before the overrides; accept `-m` anywhere, as in
     # `brdfbench harness=render scene=sphere_envmap -m representation=merl,nbrdf`.
     flags = [a for a in argv if a in ("-m", "--multirun")]
-    try:
-        check_words(argv, SUBCOMMANDS, tuple(sorted(TOP_LEVEL)))
-        check_group_choices([a for a in argv if not a.startswith("-")])
-    except BrdfbenchError as exc:
-        print(f"brdfbench: error: {exc}", file=sys.stderr, flush=True)
-        return 2
-    sys.argv = ["brdfbench", *flags, *(a for a in argv if a not in flags)]
-    _app()
-    return 0
+    check_words(argv, SUBCOMMANDS, tuple(sorted(TOP_LEVEL)))
+    check_group_choices([a for a in argv if not a.startswith("-")])
+    return ["brdfbench", *flags, *(a for a in argv if a not in flags)]
+
+
+#: The entry Hydra wraps: reads `sys.argv` (set it with `checked_argv`), composes, sweeps,
+#: and calls back `SweepCallback` and the task function. `brdfbench.cli` calls it, so that
+#: Hydra's calls into the sweeper and back into this module all start from the command line.
+main = _app

@@ -1,13 +1,18 @@
-"""Composed Hydra configs → typed jobs (`to_run_config`), and the per-job summary file a
-sweep's end reads (`brdfbench_job.json` in the job's Hydra output folder)."""
+"""A sweep's jobs: each job's overrides (`job_overrides`: the basic sweeper's expansion plus a
+profile's sections), how many run at once (`parallel_workers`), composed Hydra configs →
+typed jobs (`to_run_config`), and the per-job summary file a sweep's end reads
+(`brdfbench_job.json` in the job's Hydra output folder)."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping, Sequence
 
+from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+from hydra.core.override_parser.overrides_parser import OverridesParser
 from omegaconf import DictConfig, OmegaConf
 
 from .. import parallelism
@@ -25,6 +30,67 @@ TOP_LEVEL = {"representation", "generator", "dataset", "harness", "scene", "seed
              "save_models",
              "isolate", "progress", "store", "store_params", "device", "workers", "threads",
              "fit_workers"}
+
+
+#: Command-line keys that choose what a run measures: with any of them, sections are left out.
+SELECTORS = frozenset({"representation", "generator", "harness", "scene"})
+
+
+def override_key(override: str) -> str:
+    key = override.split("=", 1)[0].lstrip("+~")
+    return key.split("@", 1)[0]
+
+
+def _text(value: Any) -> str:
+    """A config value as override syntax (null, true/false; strings and sweeps as written)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+def job_overrides(params: Mapping[str, Any] | None, sections: Mapping[str, Mapping[str, Any]] | None,
+                  arguments: Sequence[str], parser: OverridesParser | None = None) -> list[list[str]]:
+    """Every job's overrides: the main sweep (`params`), then each of a profile's `sections`,
+    which are left out where the command line's `arguments` choose what to measure
+    (`SELECTORS`); see hydra_plugins.brdfbench_sweeper."""
+    parser = parser or OverridesParser.create()
+    keys = {override_key(a) for a in arguments}
+    # a generator job measures the generator: the profile's sweep over representations would
+    # only repeat it once per representation
+    main = [f"{k}={_text(v)}" for k, v in (params or {}).items() if not ("generator" in keys and k == "representation")]
+    groups = [main]
+    if not any(override_key(a) in SELECTORS for a in arguments):
+        for section in (sections or {}).values():
+            groups.append([f"{k}={_text(v)}" for k, v in (section or {}).items()])
+    jobs: list[list[str]] = []
+    for group in groups:
+        parsed = parser.parse_overrides(group + list(arguments))
+        jobs += [job for batch in BasicSweeper.split_arguments(parsed, None) for job in batch]
+    return jobs
+
+
+def basic_launcher(launcher: Any) -> bool:
+    """Whether `launcher` is Hydra's basic launcher (jobs in this process, one at a time)."""
+    return type(launcher).__name__ == "BasicLauncher"
+
+
+def parallel_workers(config: Any, n_jobs: int) -> int:
+    """How many of a sweep's `n_jobs` jobs run at once in joblib's process pool under the
+    basic launcher (1: one after another, in this process): `workers` where the machine has
+    the cores and joblib's plugin is installed."""
+    try:
+        workers, _ = parallelism.resolve(config.get("workers", "auto"), config.get("threads", "auto"), n_jobs)
+    except ConfigError:
+        return 1  # the jobs' validation reports it
+    if workers < 2:
+        return 1
+    try:
+        importlib.import_module("hydra_plugins.hydra_joblib_launcher.joblib_launcher")
+    except ImportError:
+        return 1  # without joblib's plugin the jobs run one at a time
+    return workers
 
 
 def _section(cfg: DictConfig, key: str) -> dict:

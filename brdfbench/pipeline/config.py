@@ -18,7 +18,6 @@ from ..device import check_spec
 from ..errors import ConfigError
 from ..harness import HarnessConfig, check_value
 from .harness_defaults import shipped_defaults
-from ..store.protocol import open_store
 
 PROGRESS = ("auto", "bar", "lines", "none")
 
@@ -114,7 +113,3 @@ class RunConfig:
             else:
                 value = check_value(f.name, value, hints[f.name], f.metadata)
             object.__setattr__(self, f.name, value)
-
-    def open_store(self):
-        """The job's results store (the `store` plugin for `results_dir`)."""
-        return open_store(self.store, self.results_dir, self.store_params)

@@ -1,18 +1,26 @@
 """Record: the only writer of a job's results, one transaction per cell.
 
-It stores the configuration behind the job's hash and the environment once, then turns
-each cell message from the executor into typed rows (a failed cell is one `error` row
-naming the cause).
+`Recorder` stores the configuration behind the job's hash and the environment once, then
+turns each cell message from the executor into typed rows (a failed cell is one `error` row
+naming the cause). `JobRecord` is what the executor talks to, in a worker or in this
+process: each cell written, counted and shown, and the environment it was measured in, so
+that control passes from the sweep to the executor to here and never back.
 """
 
 from __future__ import annotations
 
-from .. import __version__
+import logging
+from typing import Any
+
+from .. import __version__, artifacts
 from ..harness import Measurement
 from ..provenance import git_sha
 from ..store.sqlite import now
 from ..store.protocol import ConfigRecord, Environment, Row, Store
-from .plan import Plan
+from .environment import environment
+from .plan import Plan, Task
+
+log = logging.getLogger(__name__)
 
 
 class Recorder:
@@ -49,3 +57,45 @@ class Recorder:
             rows = [Row(metric="error", value=None, unit="", higher_is_better=False, status="failed", message=message,
                         **common)]
         return self.store.write_cell(rows)
+
+
+class JobRecord:
+    """One job's cells as they arrive: written by `recorder`, counted (`counts`), shown by
+    `progress` (`brdfbench.pipeline.progress.Progress`)."""
+
+    def __init__(self, cfg: Any, plan: Plan, recorder: Recorder, progress: Any):
+        self.cfg, self.plan, self.recorder, self.progress = cfg, plan, recorder, progress
+        self.counts = {"done": 0, "skipped": plan.skipped, "failed": 0}
+        self.finished: set[str] = set()
+
+    def cell(self, message: tuple) -> None:
+        """A cell message from the executor: (material, category, measurements, status, text,
+        concurrent jobs)."""
+        material, category, measurements, status, text, concurrent = message
+        cfg, plan = self.cfg, self.plan
+        self.finished.add(material)
+        try:
+            self.recorder.cell(material, category, measurements, status, text, concurrent)
+        except Exception:  # not stored (a full disk): leave no file of a cell the store does not hold
+            artifacts.discard(cfg.results_dir, plan.config_hash, material)
+            if cfg.save_models and not cfg.generator:
+                artifacts.saved_model_path(cfg.results_dir, plan.dataset.fingerprint, cfg.label, material).unlink(missing_ok=True)
+            raise
+        self.counts["done" if status == "ok" else "failed"] += 1
+        if status != "ok":
+            log.warning("%s on %s failed: %s", cfg.label, material, text)
+        self.progress.cell(material, status, measurements)
+
+    def note(self, text: str) -> None:
+        """A phase's note (a fit's progress, the set being rendered)."""
+        self.progress.note(text)
+
+    def environment(self, threads: int, device: tuple[str, str] = ("cpu", "cpu")) -> None:
+        """Where the next cells are measured: `threads` torch threads, on `device`."""
+        self.recorder.environment(environment(threads, self.cfg.launcher, device))
+
+    def unfinished(self, task: Task, message: str) -> None:
+        """The cells of `task` that sent no result (a hang, a crash), each failed with `message`."""
+        for name in task.materials:
+            if name not in self.finished:
+                self.cell((name, self.plan.category(name), [], "failed", message, 1))

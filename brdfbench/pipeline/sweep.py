@@ -22,15 +22,15 @@ import uuid
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from .. import artifacts
 from ..errors import BrdfbenchError, os_error
 from ..report import write_reports
+from ..store.protocol import open_store
 from . import plan
 from .config import RunConfig
-from .environment import ActiveMarker, environment
+from .environment import ActiveMarker
 from .execute import execute, job_state
 from .progress import Progress
-from .record import Recorder
+from .record import JobRecord, Recorder
 from .worker import apply_threads, shared_worker
 
 __all__ = ["InvalidSweep", "check_jobs", "finish", "run_job", "run_one", "run_sweep", "writable"]
@@ -128,60 +128,34 @@ def run_job(cfg: RunConfig, checked: plan.Checked | None = None) -> dict[str, in
     failed. `checked` is the job's check where the caller made it (a sweep's start), so the
     job is not checked again in this process."""
     checked = plan.check(cfg) if checked is None else checked
-    store = cfg.open_store()
+    store = open_store(cfg.store, cfg.results_dir, cfg.store_params)
     job_plan = plan.make_plan(cfg, checked, store.done_cells)
-    recorder = Recorder(store, job_plan, uuid.uuid4().hex[:12])
-    counts = {"done": 0, "skipped": job_plan.skipped, "failed": 0}
     progress = Progress(cfg, job_plan.total, job_plan.skipped,
                         unit="set" if checked.harness_cls.scope == "set" else "material")
-
-    def on_cell(message: tuple) -> None:
-        material, category, measurements, status, text, concurrent = message
-        try:
-            recorder.cell(material, category, measurements, status, text, concurrent)
-        except Exception:  # not stored (a full disk): leave no file of a cell the store does not hold
-            artifacts.discard(cfg.results_dir, job_plan.config_hash, material)
-            if cfg.save_models and not cfg.generator:
-                artifacts.saved_model_path(cfg.results_dir, job_plan.dataset.fingerprint, cfg.label, material).unlink(missing_ok=True)
-            raise
-        counts["done" if status == "ok" else "failed"] += 1
-        if status != "ok":
-            log.warning("%s on %s failed: %s", cfg.label, material, text)
-        progress.cell(material, status, measurements)
-
+    record = JobRecord(cfg, job_plan, Recorder(store, job_plan, uuid.uuid4().hex[:12]), progress)
     try:
         if cfg.isolate:
-            _run_isolated(cfg, job_plan, recorder, on_cell, progress.note)
+            _run_isolated(cfg, job_plan, record)
         elif job_plan.tasks:
-            _run_inline(cfg, job_plan, recorder, on_cell, progress.note)
+            _run_inline(cfg, job_plan, record)
     finally:
         progress.close()
-    return counts
+    return record.counts
 
 
-def _run_isolated(cfg: RunConfig, job_plan: plan.Plan, recorder: Recorder, on_cell, on_note) -> None:
+def _run_isolated(cfg: RunConfig, job_plan: plan.Plan, record: JobRecord) -> None:
     worker = shared_worker()
     for task in job_plan.tasks:
-        finished: set[str] = set()
-
-        def cell(message: tuple) -> None:
-            finished.add(message[0])
-            on_cell(message)
-
-        recorder.environment(environment(worker.ensure().threads, cfg.launcher, worker.device))
-        outcome = worker.run(cfg, task, cell, on_note,
-                             on_device=lambda device: recorder.environment(environment(worker.threads, cfg.launcher, device)))
+        record.environment(worker.ensure().threads, worker.device)
+        outcome = worker.run(cfg, task, record.cell, record.note, record.environment)
         # a hang or a crash: the task's unfinished cells fail with its cause (and none is ever lost)
-        message = outcome.message or "the worker finished its task without a result for this material"
-        for name in task.materials:
-            if name not in finished:
-                on_cell((name, job_plan.category(name), [], "failed", message, 1))
+        record.unfinished(task, outcome.message or "the worker finished its task without a result for this material")
 
 
 _INLINE_WARNED: set[str] = set()  # warnings of in-process runs given once per process
 
 
-def _run_inline(cfg: RunConfig, job_plan: plan.Plan, recorder: Recorder, on_cell, on_note) -> None:
+def _run_inline(cfg: RunConfig, job_plan: plan.Plan, record: JobRecord) -> None:
     import torch
 
     log.warning("isolate=false: cells run in this process with no time limit")
@@ -191,14 +165,14 @@ def _run_inline(cfg: RunConfig, job_plan: plan.Plan, recorder: Recorder, on_cell
     state = job_state(cfg, job_plan.checked)  # the plan's check: the job is not checked again
     if cfg.threads:
         apply_threads(cfg.threads)
-    recorder.environment(environment(torch.get_num_threads(), cfg.launcher, state.recorded_device))
+    record.environment(torch.get_num_threads(), state.recorded_device)
     marker = ActiveMarker()
 
     def emit(message: tuple) -> None:
         if message[0] == "cell":
-            on_cell(message[1:])
+            record.cell(message[1:])
         elif message[0] == "phase" and message[3] is not None:
-            on_note(message[3])
+            record.note(message[3])
 
     with marker:
         for task in job_plan.tasks:

@@ -139,7 +139,10 @@ class Worker:
 
     def run(self, job: RunConfig, task: Task, on_cell: Callable[[tuple], None],
             on_note: Callable[[str], None] = lambda note: None,
-            on_device: Callable[[tuple[str, str]], None] = lambda device: None) -> Outcome:
+            on_device: Callable[[int, tuple[str, str]], None] = lambda threads, device: None) -> Outcome:
+        """Send `task` to the worker and wait for it: each cell goes to `on_cell`, each phase's
+        note to `on_note`, and the device the job computes on (with the worker's thread count)
+        to `on_device` before its first cell."""
         self.ensure()
         limit = self._memory_limit(job)
         if limit is not None:
@@ -178,7 +181,7 @@ class Worker:
                 self.threads = msg[1]
             elif kind == "device":  # sent before the job's first cell
                 self.device = msg[1]
-                on_device(msg[1])
+                on_device(self.threads, msg[1])
             elif kind == "fatal":  # raised once the worker has finished the task (its "done" follows)
                 fatal = msg[1]
             elif kind == "done":

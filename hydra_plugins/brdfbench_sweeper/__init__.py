@@ -17,73 +17,14 @@ workers ran beside it, and `workers=1` runs the jobs one after another on every 
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping
 
 from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
-#: Command-line keys that choose what a run measures: with any of them, sections are left out.
-SELECTORS = frozenset({"representation", "generator", "harness", "scene"})
+from brdfbench.hydra.jobs import basic_launcher, job_overrides, override_key, parallel_workers
 
-
-def _key(override: str) -> str:
-    key = override.split("=", 1)[0].lstrip("+~")
-    return key.split("@", 1)[0]
-
-
-def _text(value: Any) -> str:
-    """A config value as override syntax (null, true/false; strings and sweeps as written)."""
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return str(value)
-
-
-def job_overrides(params: Mapping[str, Any] | None, sections: Mapping[str, Mapping[str, Any]] | None,
-                  arguments: Sequence[str], parser: OverridesParser | None = None) -> list[list[str]]:
-    """Every job's overrides: the main sweep, then each section's (see the module docstring)."""
-    parser = parser or OverridesParser.create()
-    keys = {_key(a) for a in arguments}
-    # a generator job measures the generator: the profile's sweep over representations would
-    # only repeat it once per representation
-    main = [f"{k}={_text(v)}" for k, v in (params or {}).items() if not ("generator" in keys and k == "representation")]
-    groups = [main]
-    if not any(_key(a) in SELECTORS for a in arguments):
-        for section in (sections or {}).values():
-            groups.append([f"{k}={_text(v)}" for k, v in (section or {}).items()])
-    jobs: list[list[str]] = []
-    for group in groups:
-        parsed = parser.parse_overrides(group + list(arguments))
-        jobs += [job for batch in BasicSweeper.split_arguments(parsed, None) for job in batch]
-    return jobs
-
-
-def _basic_launcher(launcher: Any) -> bool:
-    return type(launcher).__name__ == "BasicLauncher"
-
-
-def parallel_workers(config: Any, n_jobs: int) -> int:
-    """How many of a sweep's `n_jobs` jobs run at once in joblib's process pool under the
-    basic launcher (1: one after another, in this process): `workers` where the machine has
-    the cores and joblib's plugin is installed."""
-    import importlib
-
-    from brdfbench import parallelism
-    from brdfbench.errors import ConfigError
-
-    try:
-        workers, _ = parallelism.resolve(config.get("workers", "auto"), config.get("threads", "auto"), n_jobs)
-    except ConfigError:
-        return 1  # the jobs' validation reports it
-    if workers < 2:
-        return 1
-    try:
-        importlib.import_module("hydra_plugins.hydra_joblib_launcher.joblib_launcher")
-    except ImportError:
-        return 1  # without joblib's plugin the jobs run one at a time
-    return workers
-
+__all__ = ["SectionSweeper", "job_overrides", "parallel_workers"]
 
 class SectionSweeper(BasicSweeper):
     """Hydra's basic sweeper over the main sweep and a profile's sections, in one batch;
@@ -106,7 +47,7 @@ class SectionSweeper(BasicSweeper):
 
         from brdfbench import parallelism
 
-        workers = parallel_workers(self.config, len(jobs)) if _basic_launcher(self.launcher) else 1
+        workers = parallel_workers(self.config, len(jobs)) if basic_launcher(self.launcher) else 1
         if workers < 2:
             return self.launcher, jobs
         from hydra_plugins.hydra_joblib_launcher.joblib_launcher import JoblibLauncher
@@ -118,7 +59,7 @@ class SectionSweeper(BasicSweeper):
         os.environ[parallelism.LAUNCHER_ENV] = f"parallel:{workers}"
         print(f"brdfbench: {len(jobs)} jobs, {workers} at a time on {threads} threads each "
               "(workers=1: one at a time, exclusive timings)", flush=True)
-        given = any(_key(a) == "threads" for a in jobs[0]) if jobs else True
+        given = any(override_key(a) == "threads" for a in jobs[0]) if jobs else True
         return launcher, jobs if given else [job + [f"threads={threads}"] for job in jobs]
 
     def sweep(self, arguments: list[str]) -> Any:

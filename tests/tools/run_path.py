@@ -10,8 +10,15 @@ reports), cut at that plugin: the files a reader must open to see how control ge
 The spine is read as a tree, depth first; a file that sits at two places of the tree is a
 return visit (the reader has to come back to a module already read).
 
-Prints the tree, the files in reading order, and the counts. Import-time frames are left out
-(a module's top level runs once, when imported, not as part of following the run).
+The files are also read as a graph, each once: a call from one file into another is an
+edge, taken from every chain of the run (helpers included). Where the graph has no cycle,
+the spine's files can be read in an order in which every call leads on to a file not yet
+read; a cycle (a file that calls back into one that called it, as a callback or a task
+function does) is where a reader has to go back.
+
+Prints the tree, the files in reading order, the counts and the cycles. Import-time frames
+are left out (a module's top level runs once, when imported, not as part of following the
+run).
 """
 
 from __future__ import annotations
@@ -168,13 +175,90 @@ def read(node: dict, depth: int = 0, order: list | None = None, lines: list | No
     return order, lines, onward
 
 
-def main(argv: list[str]) -> int:
-    overrides = argv or DEFAULT
+def calls(chains: list[list[tuple[str, str]]], plugins: set[str] | None = None) -> dict[tuple[str, str], set[str]]:
+    """(caller file, callee file) -> the calls it stands for ("caller fn -> callee fn"), for
+    every step of the chains where control passes from one file into another; with
+    `plugins`, each chain cut at its first plugin file (the way in, not a plugin's insides)."""
+    out: dict[tuple[str, str], set[str]] = {}
+    for chain in chains:
+        if plugins is not None:
+            first = next((i for i, (f, _) in enumerate(chain) if f in plugins), len(chain) - 1)
+            chain = chain[:first + 1]
+        for (a, fa), (b, fb) in zip(chain, chain[1:]):
+            if a != b:
+                out.setdefault((a, b), set()).add(f"{fa} -> {fb}")
+    return out
+
+
+def cycles(edges) -> list[list[str]]:
+    """The strongly connected groups of more than one file (Tarjan), each in first-seen order."""
+    graph: dict[str, list[str]] = {}
+    for a, b in edges:
+        graph.setdefault(a, []).append(b)
+        graph.setdefault(b, [])
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    groups: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                group.append(w)
+                if w == v:
+                    break
+            if len(group) > 1:
+                groups.append(sorted(group, key=index.get))
+
+    for v in list(graph):
+        if v not in index:
+            visit(v)
+    return groups
+
+
+def reading_order(files: list[str], edges) -> list[str] | None:
+    """The spine's files in an order in which each comes after every spine file that calls
+    it (ties in `files`' order), or None where a cycle leaves none."""
+    rank = {f: i for i, f in enumerate(files)}
+    callers = {f: {a for a, b in edges if b == f and a in rank and a != f} for f in files}
+    order: list[str] = []
+    while len(order) < len(files):
+        ready = [f for f in files if f not in order and not callers[f] - set(order)]
+        if not ready:
+            return None
+        order.append(min(ready, key=rank.get))
+    return order
+
+
+def measure(overrides: list[str]) -> dict:
+    """One traced run: its chains, the plugin files, the spine's files (first-read order),
+    its tree (reading order with repeats, printed lines, onward returns), the calls on the way
+    in and their cycles."""
     chains = trace(overrides)
     plugins = plugin_files(ROOT)
-    ways = spine(chains, plugins)
-    order, lines, onward = read(tree(ways))
-    files = list(dict.fromkeys(order))
+    order, lines, onward = read(tree(spine(chains, plugins)))
+    edges = calls(chains, plugins)
+    return {"chains": chains, "plugins": plugins, "files": list(dict.fromkeys(order)), "order": order,
+            "lines": lines, "onward": onward, "edges": edges, "cycles": cycles(edges)}
+
+
+def main(argv: list[str]) -> int:
+    overrides = argv or DEFAULT
+    m = measure(overrides)
+    chains, plugins, order, lines, onward, files = (m[k] for k in ("chains", "plugins", "order", "lines", "onward", "files"))
     returns = len(order) - len(files)
     core = [f for f in files if f not in plugins]
     print(f"brdfbench {' '.join(overrides)}\n")
@@ -185,6 +269,22 @@ def main(argv: list[str]) -> int:
         print(f"{i:3d}. {f}{'  (plugin)' if f in plugins else ''}")
     print(f"\n{len(core)} of them are not plugins; {len(onward)} of the return visits go on from there into "
           f"other files (the rest look up a function of a module already read): {', '.join(onward)}")
+    edges, loops = m["edges"], m["cycles"]
+    inside = [g for g in cycles(calls(chains)) if g not in loops]
+    for title, groups, among in (("on the way from the command line to the plugins (a reader goes back to a file)", loops, edges),
+                                 ("inside plugins and the helpers they call", inside, calls(chains))):
+        print(f"\n{len(groups)} cycle{'s' if len(groups) != 1 else ''} {title}:")
+        for group in groups:
+            members = set(group)
+            print("  " + " <-> ".join(group))
+            for (a, b), how in sorted(among.items()):
+                if a in members and b in members:
+                    print(f"      {a} -> {b}: {'; '.join(sorted(how))}")
+    order = reading_order(files, edges)
+    if order is not None:
+        print("\nthe spine read once, each file after every file that calls it:")
+        for i, f in enumerate(order, 1):
+            print(f"{i:3d}. {f}{'  (plugin)' if f in plugins else ''}")
     every = {f for c in chains for f, _ in c}
     print(f"\n{len(every)} project files run in all (helpers called along the way included)")
     return 0
