@@ -60,11 +60,13 @@ class Recorder:
 
 
 class JobRecord:
-    """One job's cells as they arrive: written by `recorder`, counted (`counts`), shown by
-    `progress` (`brdfbench.pipeline.progress.Progress`)."""
+    """One job's cells as they arrive: written by `recorder` (for its plan's job), counted
+    (`counts`), shown by `progress` (`brdfbench.pipeline.progress.Progress`)."""
 
-    def __init__(self, cfg: Any, plan: Plan, recorder: Recorder, progress: Any):
-        self.cfg, self.plan, self.recorder, self.progress = cfg, plan, recorder, progress
+    def __init__(self, recorder: Recorder, progress: Any):
+        self.recorder, self.progress = recorder, progress
+        self.plan = plan = recorder.plan
+        self.cfg = plan.job
         self.counts = {"done": 0, "skipped": plan.skipped, "failed": 0}
         self.finished: set[str] = set()
 

@@ -132,7 +132,7 @@ def run_job(cfg: RunConfig, checked: plan.Checked | None = None) -> dict[str, in
     job_plan = plan.make_plan(cfg, checked, store.done_cells)
     progress = Progress(cfg, job_plan.total, job_plan.skipped,
                         unit="set" if checked.harness_cls.scope == "set" else "material")
-    record = JobRecord(cfg, job_plan, Recorder(store, job_plan, uuid.uuid4().hex[:12]), progress)
+    record = JobRecord(Recorder(store, job_plan, uuid.uuid4().hex[:12]), progress)
     try:
         if cfg.isolate:
             _run_isolated(cfg, job_plan, record)

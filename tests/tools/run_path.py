@@ -32,6 +32,10 @@ from pathlib import Path
 
 import brdfbench
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # run as a script or imported by the tests
+
+from graphs import cycles  # noqa: E402
+
 ROOT = Path(brdfbench.__file__).resolve().parents[1]  # the checkout the installed brdfbench runs from
 FOLDERS = ("brdfbench", "representations", "generators", "metrics", "leaderboard", "hydra_plugins")
 ENTRIES = {("brdfbench/cli.py", "main"), ("brdfbench/pipeline/worker.py", "_worker_main")}
@@ -190,43 +194,12 @@ def calls(chains: list[list[tuple[str, str]]], plugins: set[str] | None = None) 
     return out
 
 
-def cycles(edges) -> list[list[str]]:
-    """The strongly connected groups of more than one file (Tarjan), each in first-seen order."""
+def call_cycles(edges) -> list[list[str]]:
+    """The groups of files that call each other round (`graphs.cycles` of the call graph)."""
     graph: dict[str, list[str]] = {}
     for a, b in edges:
         graph.setdefault(a, []).append(b)
-        graph.setdefault(b, [])
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    on: set[str] = set()
-    groups: list[list[str]] = []
-
-    def visit(v: str) -> None:
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on.add(v)
-        for w in graph[v]:
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in on:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            group = []
-            while True:
-                w = stack.pop()
-                on.discard(w)
-                group.append(w)
-                if w == v:
-                    break
-            if len(group) > 1:
-                groups.append(sorted(group, key=index.get))
-
-    for v in list(graph):
-        if v not in index:
-            visit(v)
-    return groups
+    return cycles(graph)
 
 
 def reading_order(files: list[str], edges) -> list[str] | None:
@@ -252,7 +225,7 @@ def measure(overrides: list[str]) -> dict:
     order, lines, onward = read(tree(spine(chains, plugins)))
     edges = calls(chains, plugins)
     return {"chains": chains, "plugins": plugins, "files": list(dict.fromkeys(order)), "order": order,
-            "lines": lines, "onward": onward, "edges": edges, "cycles": cycles(edges)}
+            "lines": lines, "onward": onward, "edges": edges, "cycles": call_cycles(edges)}
 
 
 def main(argv: list[str]) -> int:
@@ -270,7 +243,7 @@ def main(argv: list[str]) -> int:
     print(f"\n{len(core)} of them are not plugins; {len(onward)} of the return visits go on from there into "
           f"other files (the rest look up a function of a module already read): {', '.join(onward)}")
     edges, loops = m["edges"], m["cycles"]
-    inside = [g for g in cycles(calls(chains)) if g not in loops]
+    inside = [g for g in call_cycles(calls(chains)) if g not in loops]
     for title, groups, among in (("on the way from the command line to the plugins (a reader goes back to a file)", loops, edges),
                                  ("inside plugins and the helpers they call", inside, calls(chains))):
         print(f"\n{len(groups)} cycle{'s' if len(groups) != 1 else ''} {title}:")

@@ -16,6 +16,10 @@ from pathlib import Path
 
 import pytest
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+
+from graphs import cycles  # noqa: E402  (tests/tools: one cycle finder for imports and calls)
+
 ROOT = Path(__file__).resolve().parents[2]
 CORE = "brdfbench"
 #: The built-in plugin packages, by import name, and their folders (pyproject's package-dir).
@@ -84,41 +88,6 @@ def import_graph(modules: dict[str, Path]) -> dict[str, dict[str, int]]:
                     edges.setdefault(target, line)
         graph[module] = edges
     return graph
-
-
-def cycles(graph: dict[str, dict[str, int]]) -> list[list[str]]:
-    """The strongly connected components of more than one module (Tarjan), sorted."""
-    index: dict[str, int] = {}
-    low: dict[str, int] = {}
-    stack: list[str] = []
-    on_stack: set[str] = set()
-    found: list[list[str]] = []
-
-    def visit(v: str) -> None:
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on_stack.add(v)
-        for w in graph.get(v, {}):
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in on_stack:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            component = []
-            while True:
-                w = stack.pop()
-                on_stack.discard(w)
-                component.append(w)
-                if w == v:
-                    break
-            if len(component) > 1:
-                found.append(sorted(component))
-
-    for v in sorted(graph):
-        if v not in index:
-            visit(v)
-    return sorted(found)
 
 
 def plugin_imports(modules: dict[str, Path], plugins=tuple(PLUGINS)) -> dict[str, list[str]]:

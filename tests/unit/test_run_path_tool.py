@@ -51,16 +51,16 @@ def test_calls_are_the_steps_between_files_cut_at_the_first_plugin():
 def test_a_file_that_calls_back_into_its_caller_is_a_cycle_and_leaves_no_reading_order():
     sweeper, worker, record = "hydra_plugins/brdfbench_sweeper/__init__.py", "brdfbench/pipeline/worker.py", "brdfbench/pipeline/record.py"
     callback = [[CLI, APP, (sweeper, "sweep"), (APP[0], "_app"), (SWEEP, "run_one")]]  # Hydra's task function
-    assert run_path.cycles(run_path.calls(callback)) == [[APP[0], sweeper]]
+    assert run_path.call_cycles(run_path.calls(callback)) == [[APP[0], sweeper]]
     files = [CLI[0], APP[0], sweeper, SWEEP]
     assert run_path.reading_order(files, run_path.calls(callback)) is None
     # the same run with the entry in the CLI: every call leads on, and the order says where to read each file
     forward = [[CLI, (sweeper, "sweep"), (APP[0], "_app"), (SWEEP, "run_one"), (worker, "run"), (record, "cell")],
                [CLI, (APP[0], "checked_argv")], [CLI, APP, (SWEEP, "run_one"), (record, "__init__")]]
     edges = run_path.calls(forward)
-    assert run_path.cycles(edges) == []
+    assert run_path.call_cycles(edges) == []
     assert run_path.reading_order([CLI[0], APP[0], SWEEP, record, sweeper, worker], edges) == [
         CLI[0], sweeper, APP[0], SWEEP, worker, record]
     # a closure of the sweep handed to the worker calls back into the sweep
     back = forward + [[CLI, (sweeper, "sweep"), (APP[0], "_app"), (SWEEP, "run_one"), (worker, "run"), (SWEEP, "cell")]]
-    assert run_path.cycles(run_path.calls(back)) == [[SWEEP, worker]]
+    assert run_path.call_cycles(run_path.calls(back)) == [[SWEEP, worker]]
